@@ -20,18 +20,18 @@ def _stage_triangulation(seed: int, out: Path, plots: bool) -> dict[str, Any]:
     """Static points seen by a 4-camera rig with 1 px noise and 10% missing views."""
     scene = synth.multiview_scene(2000, 4, noise_px=1.0, missing=0.1, seed=seed)
     t0 = time.perf_counter()
-    X, info = triangulate(np.transpose(scene.obs.x, (0, 1, 2)), scene.cameras, return_info=True)
+    X, info = triangulate(scene.obs.x, scene.cameras, return_info=True)
     dt = time.perf_counter() - t0
     ok = np.isfinite(X).all(axis=1)
     err = np.linalg.norm(X[ok] - scene.obs.points[ok], axis=1)
     s, R, t = align_similarity(scene.obs.points[ok], X[ok])
     if plots:
-        save_figure(
-            __import__("socialcam.viz", fromlist=["x"]).plot_reconstruction(
-                scene.cameras, scene.obs.points, X, title="4-view triangulation, 1 px noise"
-            ),
-            out / "triangulation.png",
+        from socialcam.viz import plot_reconstruction
+
+        fig = plot_reconstruction(
+            scene.cameras, scene.obs.points, X, title="4-view triangulation, 1 px noise"
         )
+        save_figure(fig, out / "triangulation.png")
     return {
         "points": len(X),
         "views": len(scene.cameras),

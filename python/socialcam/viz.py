@@ -40,6 +40,18 @@ def plot_cameras(
     ax.quiver(C[:, 0], C[:, 1], C[:, 2], z[:, 0], z[:, 1], z[:, 2], length=size, color=color)
 
 
+def set_equal_aspect(ax: Any, points: npt.ArrayLike) -> None:
+    """Gives a 3D axis the same scale on x, y and z around ``points (N, 3)``."""
+    P = np.asarray(points, dtype=float).reshape(-1, 3)
+    P = P[np.isfinite(P).all(axis=1)]
+    lo, hi = P.min(axis=0), P.max(axis=0)
+    c, r = (lo + hi) / 2, max((hi - lo).max() / 2, 1e-9)
+    ax.set_xlim(c[0] - r, c[0] + r)
+    ax.set_ylim(c[1] - r, c[1] + r)
+    ax.set_zlim(c[2] - r, c[2] + r)
+    ax.set_box_aspect((1, 1, 1))
+
+
 def plot_reconstruction(
     cameras: Cameras,
     truth: npt.ArrayLike,
@@ -64,11 +76,13 @@ def plot_reconstruction(
     ax.set_zlabel("z [m]")
     ax.legend(loc="upper left", fontsize=8)
     ax.set_title(title)
+    set_equal_aspect(ax, np.r_[X, cameras.C])
     ax2 = fig.add_subplot(1, 2, 2)
     e = err_mm[np.isfinite(err_mm)]
-    ax2.hist(e, bins=50, color="tab:red", alpha=0.8)
+    hi = np.percentile(e, 99.5)
+    ax2.hist(np.minimum(e, hi), bins=50, range=(0, hi), color="tab:red", alpha=0.8)
     ax2.axvline(np.median(e), color="k", ls="--", label=f"median {np.median(e):.1f} mm")
-    ax2.set_xlabel("3D error [mm]")
+    ax2.set_xlabel("3D error [mm] (last bin: the worst 0.5%)")
     ax2.set_ylabel("points")
     ax2.legend()
     fig.tight_layout()
