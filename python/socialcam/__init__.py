@@ -7,7 +7,7 @@ Conventions (see DESIGN.md): metres, seconds, radians; float64 arrays; pinhole
 ``P = K R [I | -C]`` with OpenCV pixel coordinates; NaN rows for missing observations.
 """
 
-from socialcam import synth
+from socialcam import mocap, sfm, synth
 from socialcam._core import __version__
 from socialcam.camera import Cameras
 from socialcam.errors import ConvergenceError, DegenerateError
@@ -28,8 +28,10 @@ __all__ = [
     "__version__",
     "align_similarity",
     "dct_basis",
+    "mocap",
     "perspective_distance",
     "ray_sphere",
+    "sfm",
     "synth",
     "triangulate",
 ]
