@@ -19,6 +19,13 @@ from socialcam.geometry import (
     ray_sphere,
     triangulate,
 )
+from socialcam.trajectory import (
+    Trajectory,
+    TrajectoryBatch,
+    reconstruct_trajectories,
+    reconstruct_trajectory,
+    reconstructability,
+)
 
 __all__ = [
     "Cameras",
@@ -34,4 +41,12 @@ __all__ = [
     "sfm",
     "synth",
     "triangulate",
+]
+# trajectory reconstruction (Chapter 5)
+__all__ += [
+    "Trajectory",
+    "TrajectoryBatch",
+    "reconstruct_trajectories",
+    "reconstruct_trajectory",
+    "reconstructability",
 ]

@@ -5,7 +5,7 @@ Array conventions: float64, row-major; cameras as ``K (F,3,3)``, ``R (F,3,3)``
 world→camera, ``C (F,3)`` centres in metres; NaN pixel rows mean "not observed".
 """
 
-from typing import TypeAlias
+from typing import Any, TypeAlias
 
 import numpy as np
 import numpy.typing as npt
@@ -57,3 +57,34 @@ def ray_sphere(origins: _F64, directions: _F64, centres: _F64, radii: _F64) -> t
 
 def perspective_distance(p: _F64, v: _F64, x: _F64) -> _F64:
     """Eq 6.2 vectors ``(N,3)``; ``inf`` rows behind the eye."""
+
+# --- trajectory reconstruction (thesis Chapter 5) ---------------------------------------
+def reconstruct_trajectories(
+    k_intr: _F64,
+    r: _F64,
+    c: _F64,
+    times: _F64,
+    x: _F64,
+    k: int | None = None,
+    folds: int = 5,
+    k_min: int = 1,
+    k_max: int | None = None,
+    cv_rule: str = "min",
+    refine: bool = True,
+    max_iterations: int = 100,
+    keep_covariance: bool = False,
+    strict: bool = False,
+) -> dict[str, Any]:
+    """Trajectories of ``x (N,F,2)`` from cameras with capture ``times (F,)``; ``k=None``
+    chooses K per point by cross validation (Eq 5.8). A dict of arrays: ``points (N,F,3)``,
+    ``std (N,F,3)``, ``coeffs (N,Kmax,3)``, ``cv_error (N,Kcv)``, ``k``, ``rms``,
+    ``rms_linear``, ``converged``, ``iterations``, ``rank``, ``cond``, ``sigma``,
+    ``observed`` ``(N,)``, ``covariance`` (list of ``(3k,3k)`` or ``None``), ``failures``
+    (list of ``str | None``) and ``span (t0, t1, n_norm)``. ``strict=True`` raises the first
+    failure."""
+
+def reconstructability(points: _F64, centres: _F64, k: int, times: _F64 | None = None) -> float:
+    """η of Eq 5.16 for a true trajectory ``(F,3)`` and camera centres ``(F,3)``."""
+
+def null_residual(trajectory: _F64, k: int, times: _F64 | None = None) -> float:
+    """``‖Θ^⊥ β^⊥‖`` of a trajectory ``(F,3)`` with ``k`` DCT functions."""

@@ -22,5 +22,6 @@
 pub mod basis;
 pub mod error;
 pub mod geometry;
+pub mod trajectory;
 
 pub use error::{Error, Result};
