@@ -24,3 +24,4 @@ pub mod error;
 pub mod geometry;
 
 pub use error::{Error, Result};
+pub mod saliency;
