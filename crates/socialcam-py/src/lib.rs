@@ -10,11 +10,13 @@ use pyo3::prelude::*;
 mod convert;
 mod errors;
 mod geometry;
+mod saliency;
 
 #[pymodule]
 fn _core(m: &Bound<'_, PyModule>) -> PyResult<()> {
     m.add("__version__", env!("CARGO_PKG_VERSION"))?;
     errors::register(m)?;
     geometry::register(m)?;
+    saliency::register(m)?;
     Ok(())
 }
