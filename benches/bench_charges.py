@@ -19,7 +19,6 @@ import sys
 import time
 
 import numpy as np
-
 import socialcam as sc
 from socialcam import synth
 
@@ -147,7 +146,7 @@ def numpy_charges(P, V, H, rng, seeds_per_ray=20, depth=(0.3, 10.0), tol=1e-5, m
         cands.sort(key=lambda c: -c[0])
         taken = np.zeros(N, bool)
         charges = []
-        for val, x, mem in cands:
+        for _val, x, mem in cands:
             mem = mem[~taken[mem]]
             if len(mem) >= min_members:
                 taken[mem] = True

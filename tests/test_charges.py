@@ -5,7 +5,6 @@ from __future__ import annotations
 
 import numpy as np
 import pytest
-
 import socialcam as sc
 from socialcam import synth
 from socialcam.charges import grid_axes
@@ -111,7 +110,7 @@ def test_exact_rays_meet_at_their_target():
     assert c.members.tolist() == [10, 11, 12, 13, 14]
     assert c.magnitude == pytest.approx(1 / (0.1 * np.sqrt(2 * np.pi)), rel=1e-6)
     assert np.isclose(np.linalg.norm(c.membership), 1.0)
-    assert c.in_region(t) and not c.in_region(t + [0, 0, 1.0])
+    assert c.in_region(t) and not c.in_region(t + np.array([0, 0, 1.0]))
     # The ellipsoid's ends lie where the field is 80 % of the peak.
     ends = c.region_centre + (c.region_axes * c.region_radii).T
     assert np.allclose(sc.saliency_field(r, ends) / c.magnitude, 0.8, atol=0.05)
