@@ -88,3 +88,65 @@ def reconstructability(points: _F64, centres: _F64, k: int, times: _F64 | None =
 
 def null_residual(trajectory: _F64, k: int, times: _F64 | None = None) -> float:
     """``‖Θ^⊥ β^⊥‖`` of a trajectory ``(F,3)`` with ``k`` DCT functions."""
+# --- social saliency and social charges (issue 5, thesis Chapter 6) ---
+
+def saliency_field(p: _F64, v: _F64, h: _F64, points: _F64) -> _F64:
+    """Social saliency (Eq 6.4) of rays ``p (N,3)``, unit ``v (N,3)``, ``h (N,)`` at
+    ``points (M,3)`` → ``(M,)``."""
+
+def saliency_grid(
+    p: _F64,
+    v: _F64,
+    h: _F64,
+    lo: tuple[float, float, float],
+    hi: tuple[float, float, float],
+    shape: tuple[int, int, int],
+) -> _F64:
+    """The field on the inclusive grid ``lo..hi`` with ``shape`` samples → ``shape`` array."""
+
+def find_charges(
+    p: _F64,
+    v: _F64,
+    h: _F64,
+    offsets: npt.NDArray[np.int64],
+    seed: int,
+    seeds_per_ray: int = 20,
+    depth_min: float = 0.3,
+    depth_max: float = 10.0,
+    tol: float = 1e-5,
+    newton: bool = True,
+    max_iter: int = 100,
+    merge_radius: float = 0.2,
+    member_sigma: float = 2.5,
+    min_members: int = 2,
+    exclusive: bool = True,
+    min_magnitude: float = 0.0,
+    bounds: tuple[tuple[float, float, float], tuple[float, float, float]] | None = None,
+    region_level: float = 0.8,
+    region_max_radius: float = 10.0,
+) -> tuple[
+    npt.NDArray[np.int64],
+    _F64,
+    _F64,
+    npt.NDArray[np.int64],
+    npt.NDArray[np.int64],
+    npt.NDArray[np.int64],
+    _F64,
+    _F64,
+    _F64,
+    _F64,
+]:
+    """Mode seeking (Eq 6.5–6.8) on the frames ``offsets (F+1,)`` of stacked rays →
+    ``frame (C,)``, ``position (C,3)``, ``magnitude (C,)``, ``support (C,)``, flat
+    ``members`` with ``member_offsets (C+1,)``, flat ``membership``, ``region_centre
+    (C,3)``, ``region_axes (C,3,3)``, ``region_radii (C,3)``."""
+
+def track_charges(
+    features: _F64,
+    frames: npt.NDArray[np.int64],
+    bandwidth: float = 0.3,
+    max_iter: int = 300,
+    bin_seeding: bool = True,
+) -> tuple[npt.NDArray[np.int64], _F64]:
+    """Mean-shift tracking of membership features ``(n,J)`` → track ids ``(n,)`` (−1 =
+    dropped duplicate) and centres ``(K,J)`` (Sec 6.1.3)."""

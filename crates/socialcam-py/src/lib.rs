@@ -11,6 +11,7 @@ mod convert;
 mod errors;
 mod geometry;
 mod trajectory;
+mod saliency;
 
 #[pymodule]
 fn _core(m: &Bound<'_, PyModule>) -> PyResult<()> {
@@ -18,5 +19,6 @@ fn _core(m: &Bound<'_, PyModule>) -> PyResult<()> {
     errors::register(m)?;
     geometry::register(m)?;
     trajectory::register(m)?;
+    saliency::register(m)?;
     Ok(())
 }

@@ -25,3 +25,4 @@ pub mod geometry;
 pub mod trajectory;
 
 pub use error::{Error, Result};
+pub mod saliency;
