@@ -22,5 +22,7 @@
 pub mod basis;
 pub mod error;
 pub mod geometry;
+// issue 6: gaze field (thesis Chapter 7)
+pub mod gazefield;
 
 pub use error::{Error, Result};
