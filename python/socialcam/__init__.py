@@ -11,6 +11,15 @@ from socialcam import synth
 from socialcam._core import __version__
 from socialcam.camera import Cameras
 from socialcam.errors import ConvergenceError, DegenerateError
+from socialcam.gazefield import (  # issue 6: gaze field (thesis Chapter 7)
+    Anomalies,
+    GazeCrossValidation,
+    GazeField,
+    cross_validate_gaze,
+    detect_anomalies,
+    fuse_gaze,
+    plot_gaze_field,
+)
 from socialcam.geometry import (
     TriangulationInfo,
     align_similarity,
@@ -32,4 +41,15 @@ __all__ = [
     "ray_sphere",
     "synth",
     "triangulate",
+]
+
+# issue 6: gaze field (thesis Chapter 7)
+__all__ += [
+    "Anomalies",
+    "GazeCrossValidation",
+    "GazeField",
+    "cross_validate_gaze",
+    "detect_anomalies",
+    "fuse_gaze",
+    "plot_gaze_field",
 ]

@@ -10,11 +10,14 @@ use pyo3::prelude::*;
 mod convert;
 mod errors;
 mod geometry;
+// issue 6: gaze field
+mod gazefield;
 
 #[pymodule]
 fn _core(m: &Bound<'_, PyModule>) -> PyResult<()> {
     m.add("__version__", env!("CARGO_PKG_VERSION"))?;
     errors::register(m)?;
     geometry::register(m)?;
+    gazefield::register(m)?;
     Ok(())
 }

@@ -17,7 +17,7 @@
 //! ray, the literal objective would be infinite as soon as one member faces away from a
 //! charge. We cap the squared distance at `tan²(max_angle)`: a ray seeing the charge behind
 //! it, or more than `max_angle` off its axis, adds a constant — it neither pulls the charge
-//! nor forbids a position (a truncated quadratic). With `max_angle → 90°` this tends to the
+//! nor forbids a position (a truncated quadratic, default 30°). With `max_angle → 90°` it tends to the
 //! thesis's objective over rays that see the charge.
 //!
 //! **κ**: fixed, or re-estimated after each M-step by maximum likelihood from the
@@ -130,7 +130,7 @@ impl Default for EmOptions {
             kappa: Kappa::Estimate { initial: 10.0 },
             max_iterations: 200,
             tolerance: 1e-7,
-            max_angle: 75f64.to_radians(),
+            max_angle: 30f64.to_radians(),
             inner_iterations: 5,
             lambda_g: 0.0,
             filter: TemporalFilter::Velocity,

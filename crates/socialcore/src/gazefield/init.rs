@@ -169,3 +169,41 @@ pub fn init_window(frames: &[WindowFrame], n: usize, sigma: f64) -> Result<Vec<V
     }
     Ok(out)
 }
+
+/// Initial charge tracks for a window from per-frame candidate positions (e.g. the social
+/// charges of Chapter 6, strongest first): a frame with at least `n` candidates keeps its
+/// first `n`, ordered to follow the previous frame ([`associate`]); a frame with fewer
+/// copies its neighbour. Errors with `Degenerate` when no frame has `n` candidates, and
+/// `InvalidInput` for `n = 0` or non-finite candidates.
+pub fn init_window_from_candidates(
+    candidates: &[Vec<Vector3<f64>>],
+    n: usize,
+) -> Result<Vec<Vec<Vector3<f64>>>> {
+    if n == 0 {
+        return Err(Error::invalid("n_charges", "zero social charges requested"));
+    }
+    for row in candidates {
+        for x in row {
+            crate::error::ensure_finite("candidates", x.as_slice())?;
+        }
+    }
+    let first = candidates
+        .iter()
+        .position(|r| r.len() >= n)
+        .ok_or_else(|| {
+            Error::degenerate(format!("no frame of the window has {n} candidate charges"))
+        })?;
+    let mut prev: Vec<Vector3<f64>> = candidates[first][..n].to_vec();
+    let mut out = Vec::with_capacity(candidates.len());
+    for r in candidates {
+        let row = if r.len() >= n {
+            let cur = &r[..n];
+            associate(&prev, cur).iter().map(|&j| cur[j]).collect()
+        } else {
+            prev.clone()
+        };
+        prev = row.clone();
+        out.push(row);
+    }
+    Ok(out)
+}

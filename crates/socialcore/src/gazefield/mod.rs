@@ -26,6 +26,7 @@
 //! ```
 
 pub mod banded;
+pub mod batch;
 pub mod em;
 pub mod field;
 pub mod init;
@@ -38,4 +39,4 @@ pub use em::{
 pub use field::{
     charge_field, validate_charges, validate_kappa, Component, GazeField, SocialCharge,
 };
-pub use init::{associate, init_charges, init_window};
+pub use init::{associate, init_charges, init_window, init_window_from_candidates};

@@ -120,7 +120,7 @@ fn exact_rays_give_exact_charges() {
 #[test]
 fn noisy_frames_recover_charges_kappa_and_membership() {
     let kappa_true = 40.0; // about 9 degrees of eye-in-head deviation
-    let cap2 = 75f64.to_radians().tan().powi(2);
+    let cap2 = 30f64.to_radians().tan().powi(2);
     let mut errs = Vec::new();
     let mut oracle = Vec::new();
     let mut kappas = Vec::new();
