@@ -10,6 +10,18 @@ Conventions (see DESIGN.md): metres, seconds, radians; float64 arrays; pinhole
 from socialcam import synth
 from socialcam._core import __version__
 from socialcam.camera import Cameras
+from socialcam.charges import (
+    Charge,
+    ChargeTrack,
+    GazeRays,
+    find_charges,
+    find_charges_sequence,
+    plot_charge_tracks,
+    plot_saliency,
+    saliency_field,
+    saliency_grid,
+    track_charges,
+)
 from socialcam.errors import ConvergenceError, DegenerateError
 from socialcam.gazefield import (  # issue 6: gaze field (thesis Chapter 7)
     Anomalies,
@@ -31,15 +43,26 @@ from socialcam.geometry import (
 
 __all__ = [
     "Cameras",
+    # social charges (issue 5)
+    "Charge",
+    "ChargeTrack",
     "ConvergenceError",
     "DegenerateError",
+    "GazeRays",
     "TriangulationInfo",
     "__version__",
     "align_similarity",
     "dct_basis",
+    "find_charges",
+    "find_charges_sequence",
     "perspective_distance",
+    "plot_charge_tracks",
+    "plot_saliency",
     "ray_sphere",
+    "saliency_field",
+    "saliency_grid",
     "synth",
+    "track_charges",
     "triangulate",
 ]
 

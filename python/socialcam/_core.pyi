@@ -58,6 +58,67 @@ def ray_sphere(origins: _F64, directions: _F64, centres: _F64, radii: _F64) -> t
 def perspective_distance(p: _F64, v: _F64, x: _F64) -> _F64:
     """Eq 6.2 vectors ``(N,3)``; ``inf`` rows behind the eye."""
 
+# --- social saliency and social charges (issue 5, thesis Chapter 6) ---
+
+def saliency_field(p: _F64, v: _F64, h: _F64, points: _F64) -> _F64:
+    """Social saliency (Eq 6.4) of rays ``p (N,3)``, unit ``v (N,3)``, ``h (N,)`` at
+    ``points (M,3)`` → ``(M,)``."""
+
+def saliency_grid(
+    p: _F64,
+    v: _F64,
+    h: _F64,
+    lo: tuple[float, float, float],
+    hi: tuple[float, float, float],
+    shape: tuple[int, int, int],
+) -> _F64:
+    """The field on the inclusive grid ``lo..hi`` with ``shape`` samples → ``shape`` array."""
+
+def find_charges(
+    p: _F64,
+    v: _F64,
+    h: _F64,
+    offsets: npt.NDArray[np.int64],
+    seed: int,
+    seeds_per_ray: int = 20,
+    depth_min: float = 0.3,
+    depth_max: float = 10.0,
+    tol: float = 1e-5,
+    max_iter: int = 500,
+    merge_radius: float = 0.2,
+    member_sigma: float = 2.5,
+    min_members: int = 2,
+    exclusive: bool = True,
+    min_magnitude: float = 0.0,
+    bounds: tuple[tuple[float, float, float], tuple[float, float, float]] | None = None,
+    region_level: float = 0.8,
+    region_max_radius: float = 10.0,
+) -> tuple[
+    npt.NDArray[np.int64],
+    _F64,
+    _F64,
+    npt.NDArray[np.int64],
+    npt.NDArray[np.int64],
+    npt.NDArray[np.int64],
+    _F64,
+    _F64,
+    _F64,
+    _F64,
+]:
+    """Mode seeking (Eq 6.5–6.8) on the frames ``offsets (F+1,)`` of stacked rays →
+    ``frame (C,)``, ``position (C,3)``, ``magnitude (C,)``, ``support (C,)``, flat
+    ``members`` with ``member_offsets (C+1,)``, flat ``membership``, ``region_centre
+    (C,3)``, ``region_axes (C,3,3)``, ``region_radii (C,3)``."""
+
+def track_charges(
+    features: _F64,
+    frames: npt.NDArray[np.int64],
+    bandwidth: float = 0.3,
+    max_iter: int = 300,
+    bin_seeding: bool = True,
+) -> tuple[npt.NDArray[np.int64], _F64]:
+    """Mean-shift tracking of membership features ``(n,J)`` → track ids ``(n,)`` (−1 =
+    dropped duplicate) and centres ``(K,J)`` (Sec 6.1.3)."""
 # ---- issue 6: gaze field (thesis Chapter 7). Rays flat: p (N,3), v (N,3), members (N,)
 # dense int64 in 0..J, offsets (F+1,) int64; windows (W,3) int64 [start, end, n_charges];
 # a field as positions (F,I,3) NaN-padded, magnitudes (F,I), kappa (F,) (NaN = no field).

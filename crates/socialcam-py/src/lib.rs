@@ -10,6 +10,7 @@ use pyo3::prelude::*;
 mod convert;
 mod errors;
 mod geometry;
+mod saliency;
 // issue 6: gaze field
 mod gazefield;
 
@@ -18,6 +19,7 @@ fn _core(m: &Bound<'_, PyModule>) -> PyResult<()> {
     m.add("__version__", env!("CARGO_PKG_VERSION"))?;
     errors::register(m)?;
     geometry::register(m)?;
+    saliency::register(m)?;
     gazefield::register(m)?;
     Ok(())
 }

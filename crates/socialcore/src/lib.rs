@@ -26,3 +26,4 @@ pub mod geometry;
 pub mod gazefield;
 
 pub use error::{Error, Result};
+pub mod saliency;

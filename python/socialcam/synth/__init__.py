@@ -9,6 +9,8 @@ Building blocks
 - observations: :func:`observe` → :class:`Observations` (pixel noise, missing data)
 - people: :func:`wander`, :func:`looking_at` → :class:`People` (gaze model of Sec 3.1)
 - a ready scene: :func:`multiview_scene`
+- social scenes with known joint attention: :func:`mocap_replica`, :func:`meeting`,
+  :func:`party` → :class:`SocialScene`
 """
 
 from __future__ import annotations
@@ -28,6 +30,7 @@ from socialcam.synth.cameras import (
 from socialcam.synth.observe import Observations, observe
 from socialcam.synth.people import People, looking_at, primary_from_true, wander
 from socialcam.synth.points import random_points, smooth_trajectories
+from socialcam.synth.social import SocialScene, meeting, mocap_replica, party
 
 
 @dataclass(frozen=True)
@@ -58,12 +61,17 @@ __all__ = [
     "MultiviewScene",
     "Observations",
     "People",
+    # social scenes (issue 5)
+    "SocialScene",
     "head_mounted",
     "intrinsics",
     "look_at",
     "looking_at",
+    "meeting",
+    "mocap_replica",
     "multiview_scene",
     "observe",
+    "party",
     "primary_from_true",
     "random_photographers",
     "random_points",
