@@ -149,56 +149,55 @@ def m_step(p, v, w, x, cap2, trials, tol, active):
 
 
 def numpy_em(p, v, init, kappa0, max_iter=200, tol=1e-7, max_angle=MAX_ANGLE, trials=5):
-    """Per-frame EM of Eq 7.10–7.13 for all frames at once. p, v: (F, J, 3); init (F, I, 3)."""
-    F, J, _ = p.shape
-    Ii = init.shape[1]
+    """Per-frame EM of Eq 7.10–7.13 for all frames at once (the arithmetic runs only on the
+    frames still iterating). p, v: (F, J, 3); init (F, I, 3)."""
+    F, _J, _ = p.shape
+    n_ch = init.shape[1]
     cap2 = np.tan(max_angle) ** 2
     r = init.copy()
-    q = np.ones((F, Ii))
+    q = np.ones((F, n_ch))
     kappa = np.full(F, kappa0)
     prev_r = r.copy()
     prev_k = kappa.copy()
     running = np.ones(F, dtype=bool)
     it = np.zeros(F, dtype=np.int64)
-    gamma = np.zeros((F, J, Ii))
     for n in range(max_iter + 1):
-        # E-step on running frames.
-        d = r[:, None, :, :] - p[:, :, None, :]  # (F, J, I, 3)
+        a = np.flatnonzero(running)
+        pa, va, ra, ka = p[a], v[a], r[a], kappa[a]
+        # E-step (Eq 7.11) and magnitudes.
+        d = ra[:, None, :, :] - pa[:, :, None, :]  # (A, J, I, 3)
         n2 = np.einsum("fjik,fjik->fji", d, d)
         mu = d / np.sqrt(n2)[..., None]
         with np.errstate(divide="ignore"):
-            lw = np.log(q)[:, None, :] - np.log(n2)
-        lw = lw - np.logaddexp.reduce(lw, axis=2, keepdims=True) if Ii > 1 else lw - lw
+            lw = np.log(q[a])[:, None, :] - np.log(n2)
+        lw = lw - np.logaddexp.reduce(lw, axis=2, keepdims=True)
         logs = (
-            lw
-            + log_c3(kappa)[:, None, None]
-            + kappa[:, None, None] * np.einsum("fjik,fjk->fji", mu, v)
+            lw + log_c3(ka)[:, None, None] + ka[:, None, None] * np.einsum("fjik,fjk->fji", mu, va)
         )
-        g_new = np.exp(logs - logs.max(axis=2, keepdims=True))
-        g_new /= g_new.sum(axis=2, keepdims=True)
-        gamma = np.where(running[:, None, None], g_new, gamma)
-        q = np.where(running[:, None], gamma.sum(axis=1), q)
+        gamma = np.exp(logs - logs.max(axis=2, keepdims=True))
+        gamma /= gamma.sum(axis=2, keepdims=True)
+        q[a] = gamma.sum(axis=1)
         if n > 0:
-            moved = np.linalg.norm(r - prev_r, axis=2).max(axis=1)
-            dk = np.abs(kappa - prev_k) / prev_k
-            conv = running & (moved < tol) & (dk < tol)
-            running &= ~conv
-        if n == max_iter or not running.any():
+            moved = np.linalg.norm(ra - prev_r[a], axis=2).max(axis=1)
+            dk = np.abs(ka - prev_k[a]) / prev_k[a]
+            done = (moved < tol) & (dk < tol)
+            running[a[done]] = False
+            keep = ~done
+            a, pa, va, ra, ka, gamma = a[keep], pa[keep], va[keep], ra[keep], ka[keep], gamma[keep]
+        if n == max_iter or len(a) == 0:
             break
-        it[running] += 1
-        prev_r = r.copy()
-        prev_k = kappa.copy()
-        for i in range(Ii):
-            r[:, i] = np.where(
-                running[:, None],
-                m_step(p, v, gamma[:, :, i] ** 2, r[:, i], cap2, trials, tol, running),
-                r[:, i],
-            )
-        d = r[:, None, :, :] - p[:, :, None, :]
+        it[a] += 1
+        prev_r[a] = ra
+        prev_k[a] = ka
+        act = np.ones(len(a), dtype=bool)
+        for i in range(n_ch):
+            ra[:, i] = m_step(pa, va, gamma[:, :, i] ** 2, ra[:, i], cap2, trials, tol, act)
+        r[a] = ra
+        d = ra[:, None, :, :] - pa[:, :, None, :]
         mu = d / np.linalg.norm(d, axis=-1, keepdims=True)
-        num = (gamma * np.einsum("fjik,fjk->fji", mu, v)).sum(axis=(1, 2))
+        num = (gamma * np.einsum("fjik,fjk->fji", mu, va)).sum(axis=(1, 2))
         den = gamma.sum(axis=(1, 2))
-        kappa = np.where(running, kappa_from_resultant(num / den), kappa)
+        kappa[a] = kappa_from_resultant(num / den)
     return r, kappa, it
 
 
