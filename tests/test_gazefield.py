@@ -250,3 +250,40 @@ def test_outlier_members_hurt_the_field_less_than_rbf():
         f"rbf {res['clean', 'rbf']:.1f} -> {res['outliers', 'rbf']:.1f} deg"
     )
     assert growth_field < 0.5 * growth_rbf
+
+
+def test_options_results_and_json():
+    import json
+
+    scene = mafia(n_frames=40, seed=7)
+    frames = scene.ray_frames()
+    for filt in ("velocity", "acceleration"):
+        for memb in ("window", "frame"):
+            f = GazeField.fit(
+                frames, n_charges=1, lambda_g=2.0, filter=filt, membership=memb, times=scene.times
+            )
+            err = np.linalg.norm(
+                f.positions[:, 0] - scene.faces[np.arange(40), scene.suspect], axis=1
+            )
+            assert np.median(err) < 0.1, (filt, memb)
+    with pytest.raises(ValueError, match="filter"):
+        GazeField.fit(frames, n_charges=1, filter="jerk")
+    with pytest.raises(ValueError, match="membership"):
+        GazeField.fit(frames, n_charges=1, membership="person")
+    field = GazeField.fit(frames, n_charges=1, times=scene.times)
+    # Nearest frame in time; a query between frames uses the closer one.
+    x = np.array([[0.0, 0.0, 1.0]])
+    np.testing.assert_array_equal(
+        field.predict(x, scene.times[3] + 0.01), field.predict(x, scene.times[3])
+    )
+    with pytest.raises(ValueError, match="t"):
+        field.predict(x)
+    a = detect_anomalies(frames, field, threshold=25.0)
+    b = detect_anomalies(frames, field, threshold=-2.0, kind="loglik")
+    assert a.flags.any() and b.flags.any()
+    # Log-density flags agree largely with angle flags on inattentive players.
+    truth = scene.inattentive.ravel()
+    assert (b.flags & truth).sum() >= 0.8 * (a.flags & truth).sum()
+    cv = cross_validate_gaze(frames, 1, "rbf", times=scene.times)
+    for obj in (field, a, cv):
+        json.dumps(obj.to_dict())
