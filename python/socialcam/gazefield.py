@@ -392,7 +392,9 @@ class GazeField:
 
     def to_dict(self) -> dict[str, Any]:
         def clean(a: np.ndarray) -> Any:
-            return np.where(np.isnan(a), None, a).tolist() if a.dtype.kind == "f" else a.tolist()
+            if a.dtype.kind != "f":
+                return a.tolist()
+            return np.where(np.isnan(a), np.array(None, dtype=object), a.astype(object)).tolist()
 
         return {k: clean(np.asarray(getattr(self, k))) for k in self.__dataclass_fields__}
 
@@ -466,11 +468,10 @@ def _charges_from_chapter6(
         raise ValueError(
             "n_charges=None needs socialcam.charges (Chapter 6); pass n_charges explicitly"
         ) from exc
-    frames = []
-    for p, v, h, ids in flat.to_frames():
-        frames.append(GazeRays(p, v, h, ids) if len(p) else None)
-    idx = [k for k, f in enumerate(frames) if f is not None]
-    found = find_charges_sequence([frames[k] for k in idx], seed, **options) if idx else []
+    parts = flat.to_frames()
+    idx = [k for k, (p, _, _, _) in enumerate(parts) if len(p)]
+    rays = [GazeRays(*parts[k]) for k in idx]
+    found = find_charges_sequence(rays, seed, **options) if idx else []
     counts = np.zeros(flat.n_frames, dtype=np.int64)
     cmax = max((len(c) for c in found), default=0)
     cand = np.full((flat.n_frames, max(cmax, 1), 3), np.nan)
@@ -548,7 +549,7 @@ def rbf_predict(
     :class:`scipy.interpolate.RBFInterpolator` (default kernel ``"linear"``, i.e. ``r``,
     with a constant term), evaluated at ``points (M, 3)`` in frames ``frame (M,)`` and
     normalised to unit length. NaN rows where a frame has no observation."""
-    from scipy.interpolate import RBFInterpolator
+    from scipy.interpolate import RBFInterpolator  # type: ignore[import-untyped]
 
     flat = _flatten(frames)
     pts = as_float_array(points, "points", (None, 3))
