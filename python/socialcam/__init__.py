@@ -23,6 +23,15 @@ from socialcam.charges import (
     track_charges,
 )
 from socialcam.errors import ConvergenceError, DegenerateError
+from socialcam.gazefield import (  # issue 6: gaze field (thesis Chapter 7)
+    Anomalies,
+    GazeCrossValidation,
+    GazeField,
+    cross_validate_gaze,
+    detect_anomalies,
+    fuse_gaze,
+    plot_gaze_field,
+)
 from socialcam.geometry import (
     TriangulationInfo,
     align_similarity,
@@ -72,4 +81,15 @@ __all__ += [
     "reconstruct_trajectories",
     "reconstruct_trajectory",
     "reconstructability",
+]
+
+# issue 6: gaze field (thesis Chapter 7)
+__all__ += [
+    "Anomalies",
+    "GazeCrossValidation",
+    "GazeField",
+    "cross_validate_gaze",
+    "detect_anomalies",
+    "fuse_gaze",
+    "plot_gaze_field",
 ]

@@ -150,3 +150,81 @@ def track_charges(
 ) -> tuple[npt.NDArray[np.int64], _F64]:
     """Mean-shift tracking of membership features ``(n,J)`` → track ids ``(n,)`` (−1 =
     dropped duplicate) and centres ``(K,J)`` (Sec 6.1.3)."""
+# ---- issue 6: gaze field (thesis Chapter 7). Rays flat: p (N,3), v (N,3), members (N,)
+# dense int64 in 0..J, offsets (F+1,) int64; windows (W,3) int64 [start, end, n_charges];
+# a field as positions (F,I,3) NaN-padded, magnitudes (F,I), kappa (F,) (NaN = no field).
+
+def gaze_split_windows(counts: npt.NDArray[np.int64], min_len: int) -> npt.NDArray[np.int64]:
+    """Windows ``(W,3)`` of constant charge count (Sec 7.3.1); runs shorter than
+    ``min_len`` frames are absorbed into a neighbour."""
+
+def gaze_init(
+    p: _F64,
+    v: _F64,
+    offsets: npt.NDArray[np.int64],
+    windows: npt.NDArray[np.int64],
+    sigma: float,
+    candidates: _F64 | None = None,
+) -> _F64:
+    """Initial charge tracks ``(F,I,3)`` (NaN-padded) from ``candidates (F,C,3)`` or from
+    pairwise ray intersections scored with bandwidth ``sigma``."""
+
+def gaze_em(
+    p: _F64,
+    v: _F64,
+    members: npt.NDArray[np.int64],
+    offsets: npt.NDArray[np.int64],
+    windows: npt.NDArray[np.int64],
+    init: _F64,
+    kappa: float | None = None,
+    kappa_init: float = 10.0,
+    max_iterations: int = 200,
+    tolerance: float = 1e-7,
+    max_angle: float = 0.5235987755982988,
+    inner_iterations: int = 5,
+    lambda_g: float = 0.0,
+    filter: str = "velocity",
+    membership: str = "window",
+) -> tuple[
+    _F64,
+    _F64,
+    _F64,
+    _F64,
+    _F64,
+    _F64,
+    npt.NDArray[np.int64],
+    npt.NDArray[np.bool_],
+]:
+    """Time-windowed EM (Eq 7.10–7.14): positions ``(F,I,3)``, magnitudes ``(F,I)``, κ
+    ``(W,)``, memberships ``(W,J,I)``, responsibilities ``(N,I)``, log-likelihood ``(W,)``,
+    iterations ``(W,)``, converged ``(W,)``."""
+
+def gaze_predict(
+    positions: _F64,
+    magnitudes: _F64,
+    kappa: _F64,
+    frame: npt.NDArray[np.int64],
+    points: _F64,
+) -> _F64:
+    """Most likely directions ``(M,3)`` (Eq 7.3); NaN rows where undefined."""
+
+def gaze_log_density(
+    positions: _F64,
+    magnitudes: _F64,
+    kappa: _F64,
+    frame: npt.NDArray[np.int64],
+    p: _F64,
+    v: _F64,
+) -> _F64:
+    """``ln p(v | p)`` ``(M,)`` (Eq 7.7); NaN where the frame has no field."""
+
+def gaze_angle_to_charges(
+    positions: _F64,
+    magnitudes: _F64,
+    kappa: _F64,
+    frame: npt.NDArray[np.int64],
+    p: _F64,
+    v: _F64,
+    self_radius: float,
+) -> _F64:
+    """Radians from ``v`` to the closest charge direction ``(M,)``; NaN where none."""

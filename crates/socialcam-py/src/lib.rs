@@ -12,6 +12,8 @@ mod errors;
 mod geometry;
 mod trajectory;
 mod saliency;
+// issue 6: gaze field
+mod gazefield;
 
 #[pymodule]
 fn _core(m: &Bound<'_, PyModule>) -> PyResult<()> {
@@ -20,5 +22,6 @@ fn _core(m: &Bound<'_, PyModule>) -> PyResult<()> {
     geometry::register(m)?;
     trajectory::register(m)?;
     saliency::register(m)?;
+    gazefield::register(m)?;
     Ok(())
 }

@@ -23,6 +23,8 @@ pub mod basis;
 pub mod error;
 pub mod geometry;
 pub mod trajectory;
+// issue 6: gaze field (thesis Chapter 7)
+pub mod gazefield;
 
 pub use error::{Error, Result};
 pub mod saliency;
