@@ -1,5 +1,20 @@
+// PyO3 signatures return tuples of arrays; naming each tuple type adds nothing.
+#![allow(clippy::type_complexity)]
+
+//! `socialcam._core`: the thin PyO3 layer over `socialcore`. Each module converts NumPy
+//! inputs (checking shapes and naming arguments), calls the core once with the GIL
+//! released, and converts the result. No algorithm lives here.
+
 use pyo3::prelude::*;
+
+mod convert;
+mod errors;
+mod geometry;
+
 #[pymodule]
-fn _core(_m: &Bound<'_, PyModule>) -> PyResult<()> {
+fn _core(m: &Bound<'_, PyModule>) -> PyResult<()> {
+    m.add("__version__", env!("CARGO_PKG_VERSION"))?;
+    errors::register(m)?;
+    geometry::register(m)?;
     Ok(())
 }

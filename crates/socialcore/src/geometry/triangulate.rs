@@ -277,7 +277,6 @@ pub fn triangulate_batch(
 mod tests {
     use super::*;
     use approx::assert_relative_eq;
-    use nalgebra::Rotation3;
 
     pub(crate) fn ring_cameras(v: usize) -> Vec<Camera> {
         let k = Matrix3::new(700.0, 0.0, 320.0, 0.0, 700.0, 240.0, 0.0, 0.0, 1.0);

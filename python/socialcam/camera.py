@@ -1,0 +1,290 @@
+"""Calibrated camera sequences: ``P = K R [I | -C]`` (OpenCV pixel convention)."""
+
+from __future__ import annotations
+
+import os
+from collections.abc import Sequence
+from typing import Any, overload
+
+import numpy as np
+import numpy.typing as npt
+
+from socialcam import _core
+from socialcam._validate import FloatArray, as_float_array, readonly
+
+#: COLMAP puts pixel (0, 0) at the corner of the top-left pixel, OpenCV at its centre.
+COLMAP_TO_OPENCV_PIXEL = -0.5
+
+
+class Cameras:
+    """A sequence of ``F`` calibrated pinhole cameras (one per frame or per view).
+
+    Parameters
+    ----------
+    K : array_like, shape (3, 3) or (F, 3, 3)
+        Upper-triangular intrinsics in pixels, shared or per frame.
+    R : array_like, shape (F, 3, 3)
+        World→camera rotations (camera looks along +z, x right, y down).
+    C : array_like, shape (F, 3)
+        Camera centres in world coordinates (metres).
+    times : array_like, shape (F,), optional
+        Capture time of each frame in seconds, on one clock shared by all cameras. Needed
+        by trajectory reconstruction; any order, not necessarily uniform.
+
+    Raises
+    ------
+    ValueError
+        Wrong shapes, non-finite values, a singular or non-upper-triangular ``K``, an ``R``
+        that is not a rotation — naming the argument and the frame.
+    """
+
+    __slots__ = ("_C", "_K", "_R", "_colmap", "_times")
+
+    def __init__(
+        self,
+        K: npt.ArrayLike,
+        R: npt.ArrayLike,
+        C: npt.ArrayLike,
+        times: npt.ArrayLike | None = None,
+    ) -> None:
+        R_ = as_float_array(R, "R", (None, 3, 3))
+        f = R_.shape[0]
+        C_ = as_float_array(C, "C", (f, 3))
+        K_ = as_float_array(K, "K")
+        if K_.shape == (3, 3):
+            K_ = np.broadcast_to(K_, (f, 3, 3)).copy()
+        elif K_.shape != (f, 3, 3):
+            raise ValueError(f"K: expected shape (3, 3) or ({f}, 3, 3), got {K_.shape}")
+        _core.validate_cameras(K_, R_, C_)
+        K_ = K_ / K_[:, 2:3, 2:3]
+        t_ = None
+        if times is not None:
+            t_ = readonly(as_float_array(times, "times", (f,)))
+        self._K = readonly(K_)
+        self._R = readonly(R_)
+        self._C = readonly(C_)
+        self._times = t_
+        self._colmap: list[Any] | None = None
+
+    # ----------------------------------------------------------------- properties
+    @property
+    def K(self) -> FloatArray:
+        """Intrinsics, ``(F, 3, 3)``."""
+        return self._K
+
+    @property
+    def R(self) -> FloatArray:
+        """World→camera rotations, ``(F, 3, 3)``."""
+        return self._R
+
+    @property
+    def C(self) -> FloatArray:
+        """Camera centres in world coordinates, ``(F, 3)`` metres."""
+        return self._C
+
+    @property
+    def times(self) -> FloatArray | None:
+        """Capture times ``(F,)`` in seconds, or ``None``."""
+        return self._times
+
+    @property
+    def P(self) -> FloatArray:
+        """Projection matrices ``K R [I | -C]``, ``(F, 3, 4)``."""
+        return _core.projection_matrices(self._K, self._R, self._C)
+
+    @property
+    def optical_axes(self) -> FloatArray:
+        """Unit viewing directions (camera +z) in world coordinates, ``(F, 3)``."""
+        return np.ascontiguousarray(self._R[:, 2, :])
+
+    def __len__(self) -> int:
+        return self._R.shape[0]
+
+    def __repr__(self) -> str:
+        t = (
+            ""
+            if self._times is None
+            else f", times=[{self._times.min():.3f}, {self._times.max():.3f}] s"
+        )
+        return f"Cameras(F={len(self)}{t})"
+
+    @overload
+    def __getitem__(self, index: int) -> Cameras: ...
+    @overload
+    def __getitem__(self, index: slice | Sequence[int] | npt.NDArray[Any]) -> Cameras: ...
+    def __getitem__(self, index: Any) -> Cameras:
+        """Sub-sequence of cameras; an integer gives a one-camera sequence."""
+        if isinstance(index, (int, np.integer)):
+            n = len(self)
+            if not -n <= int(index) < n:
+                raise IndexError(f"camera index {index} out of range for {n} cameras")
+            index = slice(int(index), int(index) + 1 if int(index) != -1 else None)
+        out = Cameras.__new__(Cameras)
+        out._K = readonly(np.ascontiguousarray(self._K[index]))
+        out._R = readonly(np.ascontiguousarray(self._R[index]))
+        out._C = readonly(np.ascontiguousarray(self._C[index]))
+        out._times = (
+            None if self._times is None else readonly(np.ascontiguousarray(self._times[index]))
+        )
+        out._colmap = (
+            None if self._colmap is None else list(np.asarray(self._colmap, dtype=object)[index])
+        )
+        return out
+
+    def with_times(self, times: npt.ArrayLike) -> Cameras:
+        """The same cameras with capture times ``(F,)`` seconds."""
+        out = self[:]
+        out._times = readonly(as_float_array(times, "times", (len(self),)))
+        return out
+
+    # ----------------------------------------------------------------- geometry
+    def project(
+        self, X: npt.ArrayLike, *, return_depth: bool = False
+    ) -> FloatArray | tuple[FloatArray, FloatArray]:
+        """Projects world points into every camera.
+
+        Parameters
+        ----------
+        X : array_like, shape (3,) or (N, 3)
+            World points in metres.
+        return_depth : bool
+            Also return the depth along each optical axis (negative = behind the camera).
+
+        Returns
+        -------
+        pixels : ndarray, shape (F, 2) or (F, N, 2)
+        depth : ndarray, shape (F,) or (F, N), only with ``return_depth``
+        """
+        X_ = as_float_array(X, "X")
+        single = X_.ndim == 1
+        if single:
+            X_ = X_.reshape(1, -1)
+        if X_.ndim != 2 or X_.shape[1] != 3:
+            raise ValueError(f"X: expected shape (3,) or (N, 3), got {np.shape(X)}")
+        px, depth = _core.project(self._K, self._R, self._C, X_)
+        if single:
+            px, depth = px[:, 0], depth[:, 0]
+        return (px, depth) if return_depth else px
+
+    def project_trajectory(self, X: npt.ArrayLike) -> FloatArray:
+        """Projects a moving point, frame ``f`` into camera ``f``.
+
+        ``X`` is ``(F, 3)`` (one point) or ``(N, F, 3)``; returns ``(F, 2)`` or ``(N, F, 2)``.
+        Points at or behind a camera give NaN pixels.
+        """
+        X_ = as_float_array(X, "X")
+        f = len(self)
+        single = X_.ndim == 2
+        if single:
+            X_ = X_[None]
+        if X_.ndim != 3 or X_.shape[1:] != (f, 3):
+            raise ValueError(f"X: expected shape ({f}, 3) or (N, {f}, 3), got {np.shape(X)}")
+        Xc = np.einsum("fij,nfj->nfi", self._R, X_ - self._C[None])
+        h = np.einsum("fij,nfj->nfi", self._K, Xc)
+        with np.errstate(divide="ignore", invalid="ignore"):
+            px = h[..., :2] / h[..., 2:3]
+        px[Xc[..., 2] <= 0] = np.nan
+        return px[0] if single else px
+
+    def _pixels_per_camera(self, x: npt.ArrayLike, *, allow_nan: bool) -> tuple[FloatArray, bool]:
+        """``x`` as ``(F, N, 2)``, and whether it was given as one pixel per camera ``(F, 2)``."""
+        x_ = as_float_array(x, "x", allow_nan=allow_nan)
+        single = x_.ndim == 2
+        if single:
+            x_ = x_[:, None]
+        if x_.ndim != 3 or x_.shape[0] != len(self) or x_.shape[2] != 2:
+            f = len(self)
+            raise ValueError(f"x: expected shape ({f}, 2) or ({f}, N, 2), got {np.shape(x)}")
+        return x_, single
+
+    def back_project(self, x: npt.ArrayLike) -> FloatArray:
+        """Unit world directions of the rays through pixels.
+
+        ``x`` is ``(F, 2)`` (one pixel per camera) or ``(F, N, 2)``; returns ``(F, 3)`` or
+        ``(F, N, 3)``. The ray of pixel ``x[f]`` starts at ``C[f]``.
+        """
+        x_, single = self._pixels_per_camera(x, allow_nan=False)
+        d = _core.back_project(self._K, self._R, self._C, x_)
+        return d[:, 0] if single else d
+
+    # ----------------------------------------------------------------- COLMAP
+    @classmethod
+    def from_colmap(
+        cls,
+        reconstruction: str | os.PathLike[str] | Any,
+        *,
+        image_names: Sequence[str] | None = None,
+        times: npt.ArrayLike | None = None,
+    ) -> Cameras:
+        """Cameras of a COLMAP reconstruction (a folder with ``cameras/images/points3D``
+        files, or a ``pycolmap.Reconstruction``), ordered by image name unless
+        ``image_names`` gives the order.
+
+        The principal point is moved from COLMAP's pixel convention (top-left pixel centre at
+        (0.5, 0.5)) to OpenCV's ((0, 0)). For camera models with lens distortion ``K`` holds
+        the pinhole part; use :meth:`undistort_points` to map raw pixel measurements to the
+        undistorted pinhole pixels that every socialcam solver expects.
+        """
+        import pycolmap
+
+        rec = reconstruction
+        if not isinstance(rec, pycolmap.Reconstruction):
+            path = os.fspath(rec)
+            if not os.path.isdir(path):
+                raise ValueError(f"reconstruction: {path!r} is not a folder")
+            rec = pycolmap.Reconstruction(path)
+        by_name = {img.name: img for img in rec.images.values()}
+        if not by_name:
+            raise ValueError("reconstruction: has no registered images")
+        names = sorted(by_name) if image_names is None else list(image_names)
+        missing = [n for n in names if n not in by_name]
+        if missing:
+            raise ValueError(f"image_names: not in the reconstruction: {missing[:5]}")
+        Ks, Rs, Cs, cams = [], [], [], []
+        for n in names:
+            img = by_name[n]
+            cam = rec.cameras[img.camera_id]
+            pose = img.cam_from_world() if callable(img.cam_from_world) else img.cam_from_world
+            Rm = np.asarray(pose.rotation.matrix(), dtype=np.float64)
+            t = np.asarray(pose.translation, dtype=np.float64)
+            Km = np.asarray(cam.calibration_matrix(), dtype=np.float64).copy()
+            Km[0, 2] += COLMAP_TO_OPENCV_PIXEL
+            Km[1, 2] += COLMAP_TO_OPENCV_PIXEL
+            Ks.append(Km)
+            Rs.append(Rm)
+            Cs.append(-Rm.T @ t)
+            cams.append(cam)
+        out = cls(np.array(Ks), np.array(Rs), np.array(Cs), times)
+        out._colmap = cams
+        return out
+
+    def undistort_points(self, x: npt.ArrayLike) -> FloatArray:
+        """Maps raw (distorted) pixels ``(F, 2)`` or ``(F, N, 2)`` in OpenCV convention to the
+        undistorted pinhole pixels of ``K``. Cameras that did not come from COLMAP (or have
+        no distortion) return the input unchanged. NaN rows stay NaN.
+        """
+        x_, single = self._pixels_per_camera(x, allow_nan=True)
+        if self._colmap is None:
+            out = x_.copy()
+        else:
+            out = np.full_like(x_, np.nan)
+            for f, cam in enumerate(self._colmap):
+                ok = np.isfinite(x_[f]).all(axis=1)
+                if not ok.any():
+                    continue
+                img = x_[f, ok] - COLMAP_TO_OPENCV_PIXEL
+                normed = np.asarray(cam.cam_from_img(img), dtype=np.float64)
+                if normed.shape[1] == 3:
+                    normed = normed[:, :2] / normed[:, 2:3]
+                h = np.c_[normed, np.ones(len(normed))] @ self._K[f].T
+                out[f, ok] = h[:, :2] / h[:, 2:3]
+        return out[:, 0] if single else out
+
+    def to_dict(self) -> dict[str, Any]:
+        """Plain JSON-able data."""
+        return {
+            "K": self._K.tolist(),
+            "R": self._R.tolist(),
+            "C": self._C.tolist(),
+            "times": None if self._times is None else self._times.tolist(),
+        }

@@ -1,0 +1,212 @@
+"""Multi-view geometry: triangulation, trajectory basis, alignment, rays."""
+
+from __future__ import annotations
+
+from dataclasses import dataclass
+from typing import Any, Literal, overload
+
+import numpy as np
+import numpy.typing as npt
+
+from socialcam import _core
+from socialcam._validate import FloatArray, as_float_array, readonly
+from socialcam.camera import Cameras
+from socialcam.errors import DegenerateError
+
+
+@dataclass(frozen=True)
+class TriangulationInfo:
+    """Diagnostics of a batched triangulation (arrays of length ``N``).
+
+    Attributes
+    ----------
+    rms : reprojection RMS in pixels after refinement (NaN where it failed)
+    rms_linear : reprojection RMS in pixels of the linear (DLT) solution
+    views : number of views that saw each point
+    converged : whether Levenberg–Marquardt met its tolerance
+    failures : per point ``None`` or the reason it could not be triangulated
+    """
+
+    rms: FloatArray
+    rms_linear: FloatArray
+    views: npt.NDArray[np.int64]
+    converged: npt.NDArray[np.bool_]
+    failures: list[str | None]
+
+    def to_dict(self) -> dict[str, Any]:
+        return {
+            "rms": self.rms.tolist(),
+            "rms_linear": self.rms_linear.tolist(),
+            "views": self.views.tolist(),
+            "converged": self.converged.tolist(),
+            "failures": list(self.failures),
+        }
+
+
+@overload
+def triangulate(
+    x: npt.ArrayLike, cameras: Cameras, refine: bool = ..., *, return_info: Literal[False] = ...
+) -> FloatArray: ...
+@overload
+def triangulate(
+    x: npt.ArrayLike, cameras: Cameras, refine: bool = ..., *, return_info: Literal[True]
+) -> tuple[FloatArray, TriangulationInfo]: ...
+def triangulate(
+    x: npt.ArrayLike, cameras: Cameras, refine: bool = True, *, return_info: bool = False
+) -> FloatArray | tuple[FloatArray, TriangulationInfo]:
+    """Triangulates static points seen by several cameras.
+
+    Linear DLT on normalised coordinates, then (``refine=True``) Levenberg–Marquardt on the
+    reprojection error with an analytic Jacobian. Runs in parallel with the GIL released.
+
+    Parameters
+    ----------
+    x : array_like, shape (V, 2) or (N, V, 2)
+        Undistorted pixels of each point in each of the ``V`` cameras; a NaN row means the
+        point was not seen in that view.
+    cameras : Cameras
+        ``V`` cameras.
+    refine : bool
+        Refine the linear solution by minimising reprojection error.
+    return_info : bool
+        Also return a :class:`TriangulationInfo`.
+
+    Returns
+    -------
+    X : ndarray, shape (3,) or (N, 3)
+        World points. In the batched form a point seen in fewer than two views, or whose rays
+        are parallel, is a NaN row (``info.failures`` says why).
+
+    Raises
+    ------
+    DegenerateError
+        Single-point form only: fewer than two views, or parallel rays.
+    ValueError
+        Wrong shapes, infinite values, mismatched number of views.
+    """
+    if not isinstance(cameras, Cameras):
+        raise ValueError(f"cameras: expected socialcam.Cameras, got {type(cameras).__name__}")
+    x_ = as_float_array(x, "x", allow_nan=True)
+    single = x_.ndim == 2
+    if single:
+        x_ = x_[None]
+    v = len(cameras)
+    if x_.ndim != 3 or x_.shape[1:] != (v, 2):
+        raise ValueError(
+            f"x: expected shape ({v}, 2) or (N, {v}, 2) for {v} cameras, got {np.shape(x)}"
+        )
+    X, rms, rms0, views, conv, why = _core.triangulate(cameras.K, cameras.R, cameras.C, x_, refine)
+    if single and why[0] is not None:
+        raise DegenerateError(why[0])
+    info = TriangulationInfo(readonly(rms), readonly(rms0), readonly(views), readonly(conv), why)
+    out = X[0] if single else X
+    return (out, info) if return_info else out
+
+
+def dct_basis(
+    times: npt.ArrayLike, k: int, t0: float | None = None, t1: float | None = None
+) -> FloatArray:
+    """The first ``k`` DCT-II trajectory basis vectors at (possibly non-uniform) times.
+
+    ``phi_j(t) = c_j cos(pi j (t - t0) / (t1 - t0))`` with ``c_0 = sqrt(1/F)``,
+    ``c_j = sqrt(2/F)`` (``F = len(times)``), so the ``(F, k)`` result has orthonormal
+    columns on uniform samples, and its first column is constant. By default ``[t0, t1]``
+    extends the sampled range by half a mean sample spacing on each side, which puts uniform
+    samples at the DCT's cell centres.
+
+    Parameters
+    ----------
+    times : array_like, shape (F,)
+        Seconds.
+    k : int
+        Number of basis vectors, ``k >= 1``.
+    t0, t1 : float, optional
+        The time span mapped to ``[0, 1]``.
+
+    Returns
+    -------
+    ndarray, shape (F, k)
+    """
+    t = as_float_array(times, "times", (None,))
+    if isinstance(k, bool) or not isinstance(k, (int, np.integer)) or k < 1:
+        raise ValueError(f"k: expected a positive integer, got {k!r}")
+    return _core.dct_basis(t, int(k), t0, t1)
+
+
+def align_similarity(
+    src: npt.ArrayLike, dst: npt.ArrayLike
+) -> tuple[float, FloatArray, FloatArray]:
+    """Least-squares similarity (Umeyama) with ``dst ≈ scale * R @ src + t``.
+
+    Parameters
+    ----------
+    src, dst : array_like, shape (N, 3)
+        Corresponding points, ``N >= 3`` and not collinear.
+
+    Returns
+    -------
+    scale : float
+    R : ndarray, shape (3, 3)
+        Proper rotation.
+    t : ndarray, shape (3,)
+
+    Raises
+    ------
+    DegenerateError
+        Fewer than 3 points, or collinear/coincident points.
+    """
+    a = as_float_array(src, "src", (None, 3))
+    b = as_float_array(dst, "dst", (None, 3))
+    s, R, t = _core.align_similarity(a, b)
+    return float(s), R, t
+
+
+def ray_sphere(
+    origins: npt.ArrayLike, directions: npt.ArrayLike, centres: npt.ArrayLike, radii: npt.ArrayLike
+) -> tuple[FloatArray, FloatArray]:
+    """Both intersections of rays with spheres (thesis Eq 4.8–4.9), batched.
+
+    Parameters
+    ----------
+    origins, directions, centres : array_like, shape (N, 3)
+        Ray origins ``C``, directions ``v`` (any non-zero length), sphere centres.
+    radii : float or array_like, shape (N,)
+
+    Returns
+    -------
+    s : ndarray, shape (N, 2)
+        Ray parameters of the two roots, larger first, with points ``C + s v``. NaN where the
+        line misses the sphere.
+    miss : ndarray, shape (N,)
+        Where the line misses, the radius at which it would touch (Sec 4.4.1 enlarges the
+        sphere to this); 0 where it hits.
+    """
+    o = as_float_array(origins, "origins", (None, 3))
+    n = o.shape[0]
+    d = as_float_array(directions, "directions", (n, 3))
+    c = as_float_array(centres, "centres", (n, 3))
+    r = np.broadcast_to(as_float_array(radii, "radii"), (n,)).copy()
+    return _core.ray_sphere(o, d, c, r)
+
+
+def perspective_distance(p: npt.ArrayLike, v: npt.ArrayLike, x: npt.ArrayLike) -> FloatArray:
+    """Perspective distance vectors of thesis Eq 6.2 between rays and points.
+
+    ``d = (x - x_hat) / ((x - p)·v)`` with ``x_hat`` the projection of ``x`` on the ray; it
+    is the offset on the plane at unit distance in front of the eye. Points behind the eye
+    get ``inf`` rows; the eye itself (``x = p``) gets the zero vector.
+
+    Parameters
+    ----------
+    p, v, x : array_like, shape (N, 3)
+        Eye centres, unit directions, query points (broadcast row by row).
+
+    Returns
+    -------
+    ndarray, shape (N, 3)
+    """
+    p_ = as_float_array(p, "p", (None, 3))
+    n = p_.shape[0]
+    v_ = as_float_array(v, "v", (n, 3))
+    x_ = as_float_array(x, "x", (n, 3))
+    return _core.perspective_distance(p_, v_, x_)

@@ -1,0 +1,89 @@
+"""Plots (matplotlib, imported lazily; the Agg backend is used when no display is set)."""
+
+from __future__ import annotations
+
+from typing import Any
+
+import numpy as np
+import numpy.typing as npt
+
+from socialcam.camera import Cameras
+
+
+def _plt() -> Any:
+    import matplotlib
+
+    if matplotlib.get_backend().lower() not in ("agg", "pdf", "svg") and not _has_display():
+        matplotlib.use("Agg")
+    import matplotlib.pyplot as plt
+
+    return plt
+
+
+def _has_display() -> bool:
+    import os
+
+    return bool(os.environ.get("DISPLAY") or os.environ.get("WAYLAND_DISPLAY"))
+
+
+def plot_cameras(
+    ax: Any,
+    cameras: Cameras,
+    *,
+    size: float = 0.4,
+    color: str = "tab:blue",
+    label: str | None = "cameras",
+) -> None:
+    """Draws camera centres and optical axes on a 3D axis."""
+    C, z = cameras.C, cameras.optical_axes
+    ax.scatter(C[:, 0], C[:, 1], C[:, 2], c=color, marker="^", s=30, label=label)
+    ax.quiver(C[:, 0], C[:, 1], C[:, 2], z[:, 0], z[:, 1], z[:, 2], length=size, color=color)
+
+
+def set_equal_aspect(ax: Any, points: npt.ArrayLike) -> None:
+    """Gives a 3D axis the same scale on x, y and z around ``points (N, 3)``."""
+    P = np.asarray(points, dtype=float).reshape(-1, 3)
+    P = P[np.isfinite(P).all(axis=1)]
+    lo, hi = P.min(axis=0), P.max(axis=0)
+    c, r = (lo + hi) / 2, max((hi - lo).max() / 2, 1e-9)
+    ax.set_xlim(c[0] - r, c[0] + r)
+    ax.set_ylim(c[1] - r, c[1] + r)
+    ax.set_zlim(c[2] - r, c[2] + r)
+    ax.set_box_aspect((1, 1, 1))
+
+
+def plot_reconstruction(
+    cameras: Cameras,
+    truth: npt.ArrayLike,
+    estimate: npt.ArrayLike,
+    *,
+    title: str = "",
+) -> Any:
+    """3D view of cameras, true and reconstructed points, beside a histogram of the 3D
+    errors in millimetres. Returns the figure."""
+    plt = _plt()
+    X = np.asarray(truth, dtype=float).reshape(-1, 3)
+    Y = np.asarray(estimate, dtype=float).reshape(-1, 3)
+    err_mm = 1e3 * np.linalg.norm(X - Y, axis=1)
+    fig = plt.figure(figsize=(11, 4.5))
+    ax = fig.add_subplot(1, 2, 1, projection="3d")
+    plot_cameras(ax, cameras)
+    ax.scatter(X[:, 0], X[:, 1], X[:, 2], s=2, c="0.6", label="ground truth")
+    ok = np.isfinite(Y).all(axis=1)
+    ax.scatter(Y[ok, 0], Y[ok, 1], Y[ok, 2], s=2, c="tab:red", label="reconstructed")
+    ax.set_xlabel("x [m]")
+    ax.set_ylabel("y [m]")
+    ax.set_zlabel("z [m]")
+    ax.legend(loc="upper left", fontsize=8)
+    ax.set_title(title)
+    set_equal_aspect(ax, np.r_[X, cameras.C])
+    ax2 = fig.add_subplot(1, 2, 2)
+    e = err_mm[np.isfinite(err_mm)]
+    hi = np.percentile(e, 99.5)
+    ax2.hist(np.minimum(e, hi), bins=50, range=(0, hi), color="tab:red", alpha=0.8)
+    ax2.axvline(np.median(e), color="k", ls="--", label=f"median {np.median(e):.1f} mm")
+    ax2.set_xlabel("3D error [mm] (last bin: the worst 0.5%)")
+    ax2.set_ylabel("points")
+    ax2.legend()
+    fig.tight_layout()
+    return fig

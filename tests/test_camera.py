@@ -1,0 +1,139 @@
+from __future__ import annotations
+
+import numpy as np
+import pytest
+import socialcam as sc
+from hypothesis import given, settings
+from hypothesis import strategies as st
+from socialcam import synth
+
+
+def _rig(seed: int = 0, n: int = 4) -> sc.Cameras:
+    return synth.ring_rig(n, seed=seed)
+
+
+def test_projection_matrix_agrees_with_project():
+    cams = _rig()
+    X = synth.random_points(20, seed=1)
+    px = cams.project(X)
+    h = np.einsum("fij,nj->fni", cams.P, np.c_[X, np.ones(len(X))])
+    np.testing.assert_allclose(px, h[..., :2] / h[..., 2:], rtol=1e-10)
+    assert cams.P.shape == (4, 3, 4)
+    # P = K R [I | -C]
+    f = 2
+    P = cams.K[f] @ cams.R[f] @ np.c_[np.eye(3), -cams.C[f]]
+    np.testing.assert_allclose(cams.P[f], P, rtol=1e-12, atol=1e-9)
+
+
+@settings(max_examples=40, deadline=None)
+@given(seed=st.integers(0, 2**31 - 1))
+def test_project_back_project_round_trip(seed):
+    cams = synth.random_photographers(6, seed=seed)
+    X = synth.random_points(5, seed=seed + 1, extent=0.5)
+    px, depth = cams.project(X, return_depth=True)
+    assert (depth > 0).all()
+    d = cams.back_project(px)  # (F, N, 3)
+    truth = X[None] - cams.C[:, None]
+    truth /= np.linalg.norm(truth, axis=-1, keepdims=True)
+    np.testing.assert_allclose(d, truth, atol=1e-10)
+
+
+def test_len_slicing_and_times():
+    cams = synth.random_photographers(10, seed=3)
+    assert len(cams) == 10
+    sub = cams[2:5]
+    assert len(sub) == 3
+    np.testing.assert_array_equal(sub.C, cams.C[2:5])
+    np.testing.assert_array_equal(sub.times, cams.times[2:5])
+    one = cams[-1]
+    assert len(one) == 1 and np.array_equal(one.R[0], cams.R[-1])
+    assert len(cams[[0, 3, 7]]) == 3
+    with pytest.raises(IndexError):
+        cams[10]
+    assert cams.with_times(np.arange(10.0) * 2).times[-1] == 18.0
+    with pytest.raises(ValueError, match="read-only"):
+        cams.C[0, 0] = 1.0
+
+
+def test_shared_K_broadcasts():
+    cams = _rig()
+    one = sc.Cameras(cams.K[0], cams.R, cams.C)
+    assert one.K.shape == (4, 3, 3)
+
+
+@pytest.mark.parametrize(
+    "change, arg",
+    [
+        (lambda K, R, C: (K, R[:, :2], C), "R"),
+        (lambda K, R, C: (K, R, C[:, :2]), "C"),
+        (lambda K, R, C: (K[:, :2], R, C), "K"),
+        (lambda K, R, C: (K, R * 1.1, C), "R"),
+        (lambda K, R, C: (K, R, np.where(np.arange(3) == 0, np.nan, C)), "C"),
+        (lambda K, R, C: (np.zeros_like(K), R, C), "K"),
+        (
+            lambda K, R, C: (
+                K * np.array([1, 1, 0])[None, :, None] * 0 + np.diag([0.0, 1, 1]),
+                R,
+                C,
+            ),
+            "K",
+        ),
+        (lambda K, R, C: (K, R @ np.diag([1.0, 1, -1]), C), "R"),
+    ],
+)
+def test_bad_cameras_name_the_argument(change, arg):
+    cams = _rig()
+    K, R, C = change(cams.K.copy(), cams.R.copy(), cams.C.copy())
+    with pytest.raises(ValueError, match=rf"^{arg}"):
+        sc.Cameras(K, R, C)
+
+
+def test_bad_times():
+    cams = _rig()
+    with pytest.raises(ValueError, match="times"):
+        sc.Cameras(cams.K, cams.R, cams.C, times=[0.0, 1.0])
+    with pytest.raises(ValueError, match="times"):
+        sc.Cameras(cams.K, cams.R, cams.C, times=[0.0, 1.0, np.inf, 2.0])
+
+
+def _write_colmap_text(folder):
+    (folder / "cameras.txt").write_text(
+        "1 PINHOLE 640 480 500 510 320.5 240.5\n2 SIMPLE_RADIAL 640 480 520 320 240 0.05\n"
+    )
+    # qw qx qy qz tx ty tz: identity, and 45° about y.
+    (folder / "images.txt").write_text(
+        "1 1 0 0 0 0.5 -0.2 3 1 a.png\n\n2 0.9238795325 0 0.3826834324 0 -1 0.1 2.5 2 b.png\n\n"
+    )
+    (folder / "points3D.txt").write_text("")
+
+
+def test_from_colmap_pixel_convention_and_centres(tmp_path):
+    _write_colmap_text(tmp_path)
+    cams = sc.Cameras.from_colmap(tmp_path)
+    assert len(cams) == 2
+    # Image a: R = I, t = (0.5, -0.2, 3) → C = -t; principal point shifted by -0.5 px.
+    np.testing.assert_allclose(cams.C[0], [-0.5, 0.2, -3.0], atol=1e-12)
+    np.testing.assert_allclose(cams.K[0], [[500, 0, 320.0], [0, 510, 240.0], [0, 0, 1]])
+    import pycolmap
+
+    rec = pycolmap.Reconstruction(str(tmp_path))
+    img = next(i for i in rec.images.values() if i.name == "b.png")
+    np.testing.assert_allclose(cams.C[1], img.projection_center(), atol=1e-9)
+    # A world point projects where COLMAP projects it, minus half a pixel.
+    X = np.array([0.3, -0.1, 2.0])
+    cam = rec.cameras[img.camera_id]
+    pose = img.cam_from_world() if callable(img.cam_from_world) else img.cam_from_world
+    xc = pose * X if hasattr(pose, "__mul__") else None
+    ours = cams[1].project(X)[0]
+    theirs = np.asarray(cam.img_from_cam(np.asarray(xc)[None]))[0] - 0.5
+    # Camera b has radial distortion: undistorting COLMAP's pixel gives our pinhole pixel.
+    np.testing.assert_allclose(cams[1].undistort_points(theirs[None])[0], ours, atol=1e-6)
+    assert np.linalg.norm(theirs - ours) > 1e-3  # distortion is really there
+
+
+def test_from_colmap_errors(tmp_path):
+    with pytest.raises(ValueError, match="reconstruction"):
+        sc.Cameras.from_colmap(tmp_path / "nope")
+    _write_colmap_text(tmp_path)
+    with pytest.raises(ValueError, match="image_names"):
+        sc.Cameras.from_colmap(tmp_path, image_names=["zzz.png"])
