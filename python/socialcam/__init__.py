@@ -9,6 +9,17 @@ Conventions (see DESIGN.md): metres, seconds, radians; float64 arrays; pinhole
 
 from socialcam import synth
 from socialcam._core import __version__
+from socialcam.articulated import (
+    ArticulatedTrajectory,
+    BqpResult,
+    Skeleton,
+    SkeletonReconstruction,
+    articulated_bqp,
+    articulated_reconstructability,
+    reconstruct_articulated,
+    reconstruct_skeleton,
+    solve_bqp,
+)
 from socialcam.camera import Cameras
 from socialcam.errors import ConvergenceError, DegenerateError
 from socialcam.geometry import (
@@ -32,4 +43,15 @@ __all__ = [
     "ray_sphere",
     "synth",
     "triangulate",
+]
+__all__ += [
+    "ArticulatedTrajectory",
+    "BqpResult",
+    "Skeleton",
+    "SkeletonReconstruction",
+    "articulated_bqp",
+    "articulated_reconstructability",
+    "reconstruct_articulated",
+    "reconstruct_skeleton",
+    "solve_bqp",
 ]

@@ -7,6 +7,7 @@
 
 use pyo3::prelude::*;
 
+mod bqp;
 mod convert;
 mod errors;
 mod geometry;
@@ -16,5 +17,6 @@ fn _core(m: &Bound<'_, PyModule>) -> PyResult<()> {
     m.add("__version__", env!("CARGO_PKG_VERSION"))?;
     errors::register(m)?;
     geometry::register(m)?;
+    bqp::register(m)?;
     Ok(())
 }

@@ -102,6 +102,11 @@ impl BqpProblem {
         Ok(BqpProblem { n, q, c })
     }
 
+    /// The stored (symmetrised) row-major `Q` and the linear term `c`.
+    pub fn coefficients(&self) -> (&[f64], &[f64]) {
+        (&self.q, &self.c)
+    }
+
     /// Number of binary variables.
     pub fn n(&self) -> usize {
         self.n
@@ -449,6 +454,12 @@ pub fn solve_bqp(problem: &BqpProblem, options: &BqpOptions) -> Result<BqpSoluti
         (best_f, true)
     };
     let objective = problem.objective(&best_x);
+    // `best_f` and `objective` may differ in the last bits (summation order).
+    let bound = if optimal {
+        objective
+    } else {
+        bound.min(objective)
+    };
     let gap = ((objective - bound) / objective.abs().max(1.0)).max(0.0);
     Ok(BqpSolution {
         x: best_x,
