@@ -7,7 +7,6 @@ from pathlib import Path
 
 import numpy as np
 import pytest
-
 import socialcam as sc
 from socialcam.mocap import load_bvh
 from socialcam.synth.cameras import look_at
@@ -103,11 +102,16 @@ class Scene:
         self.cams = sc.Cameras(K, look_at(C, P[:, 0], up=(0.0, 1.0, 0.0)), C, np.arange(F) / 60)
         self.P = P
         self.px = np.stack(
-            [sc._core.project(K[None], self.cams.R[i : i + 1], C[i : i + 1], P[i])[0][0] for i in range(F)]
+            [
+                sc._core.project(K[None], self.cams.R[i : i + 1], C[i : i + 1], P[i])[0][0]
+                for i in range(F)
+            ]
         )
         self.k = 8
         self.eta = {
-            j: sc.articulated_reconstructability(self.cams, P[:, self.skeleton.parents[j]], P[:, j], self.k)
+            j: sc.articulated_reconstructability(
+                self.cams, P[:, self.skeleton.parents[j]], P[:, j], self.k
+            )
             for j in range(1, len(self.skeleton.names))
         }
 

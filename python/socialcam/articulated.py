@@ -130,8 +130,7 @@ class ArticulatedTrajectory:
 
     def to_dict(self) -> dict[str, Any]:
         return {
-            k: (v.tolist() if isinstance(v, np.ndarray) else v)
-            for k, v in self.__dict__.items()
+            k: (v.tolist() if isinstance(v, np.ndarray) else v) for k, v in self.__dict__.items()
         }
 
 
@@ -394,7 +393,17 @@ def reconstruct_skeleton(
     t = _times(cameras)
     lengths = _bone_lengths(skeleton.parents, skeleton.lengths)
     X, dicts = _core.reconstruct_skeleton(
-        cameras.K, cameras.R, cameras.C, x_, list(skeleton.parents), lengths, r_, t, int(k), refine, time_limit
+        cameras.K,
+        cameras.R,
+        cameras.C,
+        x_,
+        list(skeleton.parents),
+        lengths,
+        r_,
+        t,
+        int(k),
+        refine,
+        time_limit,
     )
     joints = tuple(None if d is None else _traj(d, t) for d in dicts)
     return SkeletonReconstruction(X, joints)
