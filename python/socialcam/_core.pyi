@@ -77,6 +77,7 @@ def reconstruct_articulated(
     k: int,
     refine: bool = True,
     time_limit: float | None = None,
+    node_limit: int | None = None,
 ) -> dict[str, Any]:
     """One articulated trajectory from ``x (F,2)`` (NaN = missing) and ``parent (F,3)``: a
     dict with ``X (F,3)``, ``radius``, ``coeffs_theta``/``coeffs_phi (K,)``, ``bqp_size``,
@@ -95,6 +96,7 @@ def reconstruct_skeleton(
     k: int,
     refine: bool = True,
     time_limit: float | None = None,
+    node_limit: int | None = None,
 ) -> tuple[_F64, list[dict[str, Any] | None]]:
     """Whole skeleton from ``x (F,J,2)`` and ``root (F,3)``: ``X (F,J,3)`` and one dict per
     joint as in :func:`reconstruct_articulated` (``None`` for the root)."""

@@ -34,6 +34,11 @@ __all__ = [
 ]
 
 
+#: Default branch-and-bound node cap of the reconstruction functions (about 10 s for
+#: n = 75 frames on one core).
+DEFAULT_NODE_LIMIT = 100_000
+
+
 @dataclass(frozen=True, eq=False)
 class BqpResult:
     """Outcome of :func:`solve_bqp`.
@@ -43,7 +48,7 @@ class BqpResult:
     x : (n,) bool, the best binary point found.
     objective : ``xᵀQx + cᵀx``.
     bound : proven lower bound on the minimum (equals ``objective`` when optimal).
-    gap : ``(objective − bound) / max(1, |objective|)``.
+    gap : relative gap ``(objective − bound) / max(|objective|, |bound|)``.
     nodes : branch-and-bound nodes processed.
     optimal : whether optimality was proven (no limit was hit).
     """
@@ -164,6 +169,7 @@ def reconstruct_articulated(
     k: int,
     refine: bool = True,
     time_limit: float | None = None,
+    node_limit: int | None = DEFAULT_NODE_LIMIT,
 ) -> ArticulatedTrajectory:
     """Reconstructs a joint at fixed distance ``length`` from a known parent trajectory.
 
@@ -177,6 +183,10 @@ def reconstruct_articulated(
     k : number of DCT basis vectors per angle.
     refine : run the Levenberg–Marquardt refinement of Eq 4.5.
     time_limit : seconds for the binary program (the best incumbent is used after it).
+    node_limit : branch-and-bound nodes for the binary program (deterministic, unlike
+        ``time_limit``); ``None`` = prove optimality whatever it takes. Near-ambiguous
+        joints (``η_a ≈ 1``) can need millions of nodes; the result says whether the
+        program was solved to optimality (``bqp_optimal``).
 
     Raises
     ------
@@ -190,7 +200,17 @@ def reconstruct_articulated(
     p_ = as_float_array(parent, "parent", (f, 3))
     t = _times(cameras)
     d = _core.reconstruct_articulated(
-        cameras.K, cameras.R, cameras.C, x_, p_, t, float(length), int(k), refine, time_limit
+        cameras.K,
+        cameras.R,
+        cameras.C,
+        x_,
+        p_,
+        t,
+        float(length),
+        int(k),
+        refine,
+        time_limit,
+        node_limit,
     )
     return _traj(d, t)
 
@@ -375,6 +395,7 @@ def reconstruct_skeleton(
     k: int = 8,
     refine: bool = True,
     time_limit: float | None = None,
+    node_limit: int | None = DEFAULT_NODE_LIMIT,
 ) -> SkeletonReconstruction:
     """Reconstructs every joint recursively from the root trajectory (Eq 4.6).
 
@@ -384,7 +405,7 @@ def reconstruct_skeleton(
     cameras : ``F`` cameras, one per frame.
     skeleton : the tree and bone lengths.
     root : (F, 3) root trajectory, metres.
-    k, refine, time_limit : as in :func:`reconstruct_articulated`, for every joint.
+    k, refine, time_limit, node_limit : as in :func:`reconstruct_articulated`, per joint.
     """
     f = len(cameras)
     j = len(skeleton.parents)
@@ -404,6 +425,7 @@ def reconstruct_skeleton(
         int(k),
         refine,
         time_limit,
+        node_limit,
     )
     joints = tuple(None if d is None else _traj(d, t) for d in dicts)
     return SkeletonReconstruction(X, joints)

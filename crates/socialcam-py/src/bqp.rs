@@ -124,11 +124,16 @@ fn times_of(t: &PyReadonlyArray1<'_, f64>, f: usize) -> PyResult<Vec<f64>> {
     Ok(v)
 }
 
-fn art_options(k: usize, refine: bool, time_limit: Option<f64>) -> PyResult<ArticulatedOptions> {
+fn art_options(
+    k: usize,
+    refine: bool,
+    time_limit: Option<f64>,
+    node_limit: Option<u64>,
+) -> PyResult<ArticulatedOptions> {
     Ok(ArticulatedOptions {
         k,
         refine,
-        bqp: bqp_options(time_limit, None)?,
+        bqp: bqp_options(time_limit, node_limit)?,
         ..ArticulatedOptions::default()
     })
 }
@@ -167,7 +172,7 @@ fn result_dict<'py>(
 
 /// One articulated trajectory (Eq 4.5–4.12); returns a dict (see `_core.pyi`).
 #[pyfunction]
-#[pyo3(signature = (k_mat, r_mat, c_mat, x, parent, times, length, k, refine=true, time_limit=None))]
+#[pyo3(signature = (k_mat, r_mat, c_mat, x, parent, times, length, k, refine=true, time_limit=None, node_limit=None))]
 #[allow(clippy::too_many_arguments)]
 fn reconstruct_articulated<'py>(
     py: Python<'py>,
@@ -181,13 +186,14 @@ fn reconstruct_articulated<'py>(
     k: usize,
     refine: bool,
     time_limit: Option<f64>,
+    node_limit: Option<u64>,
 ) -> PyResult<Bound<'py, pyo3::types::PyDict>> {
     let cams = cameras(&k_mat, &r_mat, &c_mat)?;
     let f = cams.len();
     let px = pixels_2d(&x, f)?;
     let par = points(&parent, "parent", f)?;
     let t = times_of(&times, f)?;
-    let opts = art_options(k, refine, time_limit)?;
+    let opts = art_options(k, refine, time_limit, node_limit)?;
     let r = detach(py, || {
         art::reconstruct_articulated(&cams, &px, &par, &t, length, &opts)
     })?;
@@ -196,7 +202,7 @@ fn reconstruct_articulated<'py>(
 
 /// Whole skeleton from its root (Eq 4.6): `(X (F,J,3), [dict or None per joint])`.
 #[pyfunction]
-#[pyo3(signature = (k_mat, r_mat, c_mat, x, parents, lengths, root, times, k, refine=true, time_limit=None))]
+#[pyo3(signature = (k_mat, r_mat, c_mat, x, parents, lengths, root, times, k, refine=true, time_limit=None, node_limit=None))]
 #[allow(clippy::too_many_arguments)]
 fn reconstruct_skeleton<'py>(
     py: Python<'py>,
@@ -211,6 +217,7 @@ fn reconstruct_skeleton<'py>(
     k: usize,
     refine: bool,
     time_limit: Option<f64>,
+    node_limit: Option<u64>,
 ) -> PyResult<(
     Bound<'py, PyArray3<f64>>,
     Vec<Option<Bound<'py, pyo3::types::PyDict>>>,
@@ -244,7 +251,7 @@ fn reconstruct_skeleton<'py>(
     }
     let rt = points(&root, "root", f)?;
     let t = times_of(&times, f)?;
-    let opts = art_options(k, refine, time_limit)?;
+    let opts = art_options(k, refine, time_limit, node_limit)?;
     let (pos, res) = detach(py, || {
         art::reconstruct_skeleton(&cams, &px, &sk, &rt, &t, &opts)
     })?;

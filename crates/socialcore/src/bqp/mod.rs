@@ -166,7 +166,7 @@ pub struct BqpSolution {
     pub objective: f64,
     /// Proven lower bound on the minimum (equal to `objective` when `optimal`).
     pub bound: f64,
-    /// `(objective − bound) / max(1, |objective|)`, zero when optimal.
+    /// Relative gap `(objective − bound) / max(|objective|, |bound|)`, zero when optimal.
     pub gap: f64,
     /// Branch-and-bound nodes processed.
     pub nodes: u64,
@@ -460,7 +460,11 @@ pub fn solve_bqp(problem: &BqpProblem, options: &BqpOptions) -> Result<BqpSoluti
     } else {
         bound.min(objective)
     };
-    let gap = ((objective - bound) / objective.abs().max(1.0)).max(0.0);
+    let gap = if objective <= bound {
+        0.0
+    } else {
+        (objective - bound) / objective.abs().max(bound.abs())
+    };
     Ok(BqpSolution {
         x: best_x,
         objective,
