@@ -78,6 +78,7 @@ def reconstruct_articulated(
     refine: bool = True,
     time_limit: float | None = None,
     node_limit: int | None = None,
+    fit_radius: bool = False,
 ) -> dict[str, Any]:
     """One articulated trajectory from ``x (F,2)`` (NaN = missing) and ``parent (F,3)``: a
     dict with ``X (F,3)``, ``radius``, ``coeffs_theta``/``coeffs_phi (K,)``, ``bqp_size``,
@@ -97,6 +98,7 @@ def reconstruct_skeleton(
     refine: bool = True,
     time_limit: float | None = None,
     node_limit: int | None = None,
+    fit_radius: bool = False,
 ) -> tuple[_F64, list[dict[str, Any] | None]]:
     """Whole skeleton from ``x (F,J,2)`` and ``root (F,3)``: ``X (F,J,3)`` and one dict per
     joint as in :func:`reconstruct_articulated` (``None`` for the root)."""
@@ -118,5 +120,6 @@ def articulated_bqp(
     times: _F64,
     length: float,
     k: int,
+    fit_radius: bool = False,
 ) -> tuple[_F64, _F64, float]:
     """``(Q (n,n), c (n,), constant)`` of Eq 4.12."""

@@ -170,6 +170,7 @@ def reconstruct_articulated(
     refine: bool = True,
     time_limit: float | None = None,
     node_limit: int | None = DEFAULT_NODE_LIMIT,
+    fit_radius: bool = False,
 ) -> ArticulatedTrajectory:
     """Reconstructs a joint at fixed distance ``length`` from a known parent trajectory.
 
@@ -187,6 +188,10 @@ def reconstruct_articulated(
         ``time_limit``); ``None`` = prove optimality whatever it takes. Near-ambiguous
         joints (``η_a ≈ 1``) can need millions of nodes; the result says whether the
         program was solved to optimality (``bqp_optimal``).
+    fit_radius : set the sphere radius to the largest parent-to-ray distance over the
+        frames instead of only enlarging ``length`` when a ray misses (the thesis). Assumes
+        the bone is once roughly perpendicular to the viewing ray; much more robust to an
+        over-estimated length and to root error.
 
     Raises
     ------
@@ -211,6 +216,7 @@ def reconstruct_articulated(
         refine,
         time_limit,
         node_limit,
+        fit_radius,
     )
     return _traj(d, t)
 
@@ -396,6 +402,7 @@ def reconstruct_skeleton(
     refine: bool = True,
     time_limit: float | None = None,
     node_limit: int | None = DEFAULT_NODE_LIMIT,
+    fit_radius: bool = False,
 ) -> SkeletonReconstruction:
     """Reconstructs every joint recursively from the root trajectory (Eq 4.6).
 
@@ -405,7 +412,8 @@ def reconstruct_skeleton(
     cameras : ``F`` cameras, one per frame.
     skeleton : the tree and bone lengths.
     root : (F, 3) root trajectory, metres.
-    k, refine, time_limit, node_limit : as in :func:`reconstruct_articulated`, per joint.
+    k, refine, time_limit, node_limit, fit_radius : as in :func:`reconstruct_articulated`,
+        for every joint.
     """
     f = len(cameras)
     j = len(skeleton.parents)
@@ -426,6 +434,7 @@ def reconstruct_skeleton(
         refine,
         time_limit,
         node_limit,
+        fit_radius,
     )
     joints = tuple(None if d is None else _traj(d, t) for d in dicts)
     return SkeletonReconstruction(X, joints)

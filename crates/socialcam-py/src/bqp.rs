@@ -129,10 +129,12 @@ fn art_options(
     refine: bool,
     time_limit: Option<f64>,
     node_limit: Option<u64>,
+    fit_radius: bool,
 ) -> PyResult<ArticulatedOptions> {
     Ok(ArticulatedOptions {
         k,
         refine,
+        fit_radius,
         bqp: bqp_options(time_limit, node_limit)?,
         ..ArticulatedOptions::default()
     })
@@ -172,7 +174,7 @@ fn result_dict<'py>(
 
 /// One articulated trajectory (Eq 4.5–4.12); returns a dict (see `_core.pyi`).
 #[pyfunction]
-#[pyo3(signature = (k_mat, r_mat, c_mat, x, parent, times, length, k, refine=true, time_limit=None, node_limit=None))]
+#[pyo3(signature = (k_mat, r_mat, c_mat, x, parent, times, length, k, refine=true, time_limit=None, node_limit=None, fit_radius=false))]
 #[allow(clippy::too_many_arguments)]
 fn reconstruct_articulated<'py>(
     py: Python<'py>,
@@ -187,13 +189,14 @@ fn reconstruct_articulated<'py>(
     refine: bool,
     time_limit: Option<f64>,
     node_limit: Option<u64>,
+    fit_radius: bool,
 ) -> PyResult<Bound<'py, pyo3::types::PyDict>> {
     let cams = cameras(&k_mat, &r_mat, &c_mat)?;
     let f = cams.len();
     let px = pixels_2d(&x, f)?;
     let par = points(&parent, "parent", f)?;
     let t = times_of(&times, f)?;
-    let opts = art_options(k, refine, time_limit, node_limit)?;
+    let opts = art_options(k, refine, time_limit, node_limit, fit_radius)?;
     let r = detach(py, || {
         art::reconstruct_articulated(&cams, &px, &par, &t, length, &opts)
     })?;
@@ -202,7 +205,7 @@ fn reconstruct_articulated<'py>(
 
 /// Whole skeleton from its root (Eq 4.6): `(X (F,J,3), [dict or None per joint])`.
 #[pyfunction]
-#[pyo3(signature = (k_mat, r_mat, c_mat, x, parents, lengths, root, times, k, refine=true, time_limit=None, node_limit=None))]
+#[pyo3(signature = (k_mat, r_mat, c_mat, x, parents, lengths, root, times, k, refine=true, time_limit=None, node_limit=None, fit_radius=false))]
 #[allow(clippy::too_many_arguments)]
 fn reconstruct_skeleton<'py>(
     py: Python<'py>,
@@ -218,6 +221,7 @@ fn reconstruct_skeleton<'py>(
     refine: bool,
     time_limit: Option<f64>,
     node_limit: Option<u64>,
+    fit_radius: bool,
 ) -> PyResult<(
     Bound<'py, PyArray3<f64>>,
     Vec<Option<Bound<'py, pyo3::types::PyDict>>>,
@@ -251,7 +255,7 @@ fn reconstruct_skeleton<'py>(
     }
     let rt = points(&root, "root", f)?;
     let t = times_of(&times, f)?;
-    let opts = art_options(k, refine, time_limit, node_limit)?;
+    let opts = art_options(k, refine, time_limit, node_limit, fit_radius)?;
     let (pos, res) = detach(py, || {
         art::reconstruct_skeleton(&cams, &px, &sk, &rt, &t, &opts)
     })?;
@@ -318,6 +322,7 @@ fn articulated_reconstructability(
 
 /// The BQP of Eq 4.12 for one joint: `(Q (n,n), c (n,), constant)`.
 #[pyfunction]
+#[pyo3(signature = (k_mat, r_mat, c_mat, x, parent, times, length, k, fit_radius=false))]
 #[allow(clippy::too_many_arguments)]
 fn articulated_bqp<'py>(
     py: Python<'py>,
@@ -329,6 +334,7 @@ fn articulated_bqp<'py>(
     times: PyReadonlyArray1<'py, f64>,
     length: f64,
     k: usize,
+    fit_radius: bool,
 ) -> PyResult<(Bound<'py, PyArray2<f64>>, Bound<'py, PyArray1<f64>>, f64)> {
     let cams = cameras(&k_mat, &r_mat, &c_mat)?;
     let f = cams.len();
@@ -345,7 +351,7 @@ fn articulated_bqp<'py>(
     }
     let span = map(socialcore::basis::DctSpan::from_times(&t))?;
     let theta = map(span.matrix(&t, k))?;
-    let cand = map(art::candidates(&cams, &px, &par, length))?;
+    let cand = map(art::candidates(&cams, &px, &par, length, fit_radius))?;
     let (p, constant, _) = map(art::articulated_qp(&cand, &theta))?;
     let n = p.n();
     let mut q = Array2::<f64>::zeros((n, n));

@@ -48,7 +48,7 @@ fn articulated_instance(f: usize, seed: u64) -> BqpProblem {
         parent.push(p);
     }
     let cams = vec![cam; f];
-    let cand = candidates(&cams, &pixels, &parent, 0.4).expect("candidates");
+    let cand = candidates(&cams, &pixels, &parent, 0.4, false).expect("candidates");
     let theta = span.matrix(&times, 8).expect("basis");
     articulated_qp(&cand, &theta).expect("qp").0
 }

@@ -29,6 +29,12 @@ pub struct ArticulatedOptions {
     pub lm: LmOptions,
     /// Limits of the branch-and-bound (on a limit the best incumbent is used).
     pub bqp: BqpOptions,
+    /// Set the sphere radius to the largest parent-to-ray distance over the observed
+    /// frames, shrinking an over-estimated length as well as enlarging a short one. The
+    /// thesis only enlarges (Sec 4.4.1, the default); fitting assumes that the bone passes
+    /// at least once near perpendicular to the viewing ray, and makes the reconstruction
+    /// robust to over-estimated lengths and root error (see the report of issue 4).
+    pub fit_radius: bool,
 }
 
 impl Default for ArticulatedOptions {
@@ -41,6 +47,7 @@ impl Default for ArticulatedOptions {
                 rel_tol: 1e-10,
             },
             bqp: BqpOptions::default(),
+            fit_radius: false,
         }
     }
 }
@@ -131,25 +138,32 @@ fn validate_common(
 }
 
 /// Both ray–sphere intersections per observed frame (Eq 4.8–4.9), after enlarging the
-/// radius to the largest parent-to-ray distance when some ray misses (Sec 4.4.1). A
-/// candidate behind the camera is replaced by the other one.
+/// radius to the largest parent-to-ray distance when some ray misses (Sec 4.4.1), or
+/// setting it to that distance when `fit_radius`. A candidate behind the camera is
+/// replaced by the other one.
 pub fn candidates(
     cameras: &[Camera],
     pixels: &[Option<Vector2<f64>>],
     parent: &[Vector3<f64>],
     length: f64,
+    fit_radius: bool,
 ) -> Result<Candidates> {
     let mut frames = Vec::new();
     let mut rays = Vec::new();
-    let mut radius = length;
+    let mut farthest: f64 = 0.0;
     for (i, u) in pixels.iter().enumerate() {
         if let Some(u) = u {
             let v = cameras[i].ray_direction(u);
-            radius = radius.max(line_point_distance(&cameras[i].c, &v, &parent[i]));
+            farthest = farthest.max(line_point_distance(&cameras[i].c, &v, &parent[i]));
             frames.push(i);
             rays.push(v);
         }
     }
+    let radius = if fit_radius && farthest > 0.0 {
+        farthest
+    } else {
+        length.max(farthest)
+    };
     let mut chi1 = Vec::with_capacity(frames.len());
     let mut chi2 = Vec::with_capacity(frames.len());
     for (&i, v) in frames.iter().zip(&rays) {
@@ -312,7 +326,7 @@ pub fn reconstruct_articulated(
     let f = cameras.len();
     let span = DctSpan::from_times(times)?;
     let theta = span.matrix(times, opts.k)?;
-    let cand = candidates(cameras, pixels, parent, length)?;
+    let cand = candidates(cameras, pixels, parent, length, opts.fit_radius)?;
     let m = cand.frames.len();
     if m < opts.k {
         return Err(Error::degenerate(format!(

@@ -177,6 +177,28 @@ fn small_radius_is_enlarged() {
 }
 
 #[test]
+fn fitted_radius_shrinks_an_overestimated_length() {
+    let s = scene(60, 0.4, 0.0, 4);
+    let mut o = opts(8);
+    o.fit_radius = true;
+    let r = reconstruct_articulated(
+        &s.cameras,
+        &s.pixels,
+        &s.parent,
+        &s.times,
+        2.0 * s.length,
+        &o,
+    )
+    .expect("reconstructs");
+    assert!(
+        (r.radius / s.length - 1.0).abs() < 0.02,
+        "radius {}",
+        r.radius
+    );
+    assert!(rel_error(&r.points, &s) < 0.05);
+}
+
+#[test]
 fn unwrap_keeps_angles_continuous() {
     let raw = [
         (0.3, 3.1),
