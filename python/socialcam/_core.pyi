@@ -228,3 +228,68 @@ def gaze_angle_to_charges(
     self_radius: float,
 ) -> _F64:
     """Radians from ``v`` to the closest charge direction ``(M,)``; NaN where none."""
+# --- binary quadratic programming and articulated motion (Chapter 4) ---
+
+def solve_bqp(
+    q: _F64, c: _F64 | None = None, time_limit: float | None = None, node_limit: int | None = None
+) -> tuple[npt.NDArray[np.bool_], float, float, float, int, bool]:
+    """Exact ``min bᵀQb + cᵀb`` over ``{0,1}ⁿ``: ``(x (n,), objective, bound, gap, nodes,
+    optimal)``."""
+
+def reconstruct_articulated(
+    k_mat: _F64,
+    r_mat: _F64,
+    c_mat: _F64,
+    x: _F64,
+    parent: _F64,
+    times: _F64,
+    length: float,
+    k: int,
+    refine: bool = True,
+    time_limit: float | None = None,
+    node_limit: int | None = None,
+    fit_radius: bool = False,
+) -> dict[str, Any]:
+    """One articulated trajectory from ``x (F,2)`` (NaN = missing) and ``parent (F,3)``: a
+    dict with ``X (F,3)``, ``radius``, ``coeffs_theta``/``coeffs_phi (K,)``, ``bqp_size``,
+    ``bqp_objective``, ``bqp_gap``, ``bqp_nodes``, ``bqp_optimal``, ``n_observed``,
+    ``reprojection_rms``, ``lm_iterations``, ``converged``."""
+
+def reconstruct_skeleton(
+    k_mat: _F64,
+    r_mat: _F64,
+    c_mat: _F64,
+    x: _F64,
+    parents: list[int],
+    lengths: list[float],
+    root: _F64,
+    times: _F64,
+    k: int,
+    refine: bool = True,
+    time_limit: float | None = None,
+    node_limit: int | None = None,
+    fit_radius: bool = False,
+) -> tuple[_F64, list[dict[str, Any] | None]]:
+    """Whole skeleton from ``x (F,J,2)`` and ``root (F,3)``: ``X (F,J,3)`` and one dict per
+    joint as in :func:`reconstruct_articulated` (``None`` for the root)."""
+
+def skeleton_order(parents: list[int], lengths: list[float]) -> list[int]:
+    """Validates a tree (``-1`` = root) and returns a parents-first joint order."""
+
+def articulated_reconstructability(
+    k_mat: _F64, r_mat: _F64, c_mat: _F64, parent: _F64, child: _F64, times: _F64, k: int
+) -> float:
+    """η_a of Eq 4.13 for a known child trajectory ``(F,3)``."""
+
+def articulated_bqp(
+    k_mat: _F64,
+    r_mat: _F64,
+    c_mat: _F64,
+    x: _F64,
+    parent: _F64,
+    times: _F64,
+    length: float,
+    k: int,
+    fit_radius: bool = False,
+) -> tuple[_F64, _F64, float]:
+    """``(Q (n,n), c (n,), constant)`` of Eq 4.12."""

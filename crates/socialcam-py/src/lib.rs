@@ -7,6 +7,7 @@
 
 use pyo3::prelude::*;
 
+mod bqp;
 mod convert;
 mod errors;
 mod geometry;
@@ -23,5 +24,6 @@ fn _core(m: &Bound<'_, PyModule>) -> PyResult<()> {
     trajectory::register(m)?;
     saliency::register(m)?;
     gazefield::register(m)?;
+    bqp::register(m)?;
     Ok(())
 }

@@ -19,7 +19,9 @@
 //! # Ok::<(), socialcore::Error>(())
 //! ```
 
+pub mod articulated;
 pub mod basis;
+pub mod bqp;
 pub mod error;
 pub mod geometry;
 pub mod trajectory;
