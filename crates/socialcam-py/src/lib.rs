@@ -11,8 +11,8 @@ mod bqp;
 mod convert;
 mod errors;
 mod geometry;
-mod trajectory;
 mod saliency;
+mod trajectory;
 // issue 6: gaze field
 mod gazefield;
 
