@@ -58,6 +58,176 @@ def ray_sphere(origins: _F64, directions: _F64, centres: _F64, radii: _F64) -> t
 def perspective_distance(p: _F64, v: _F64, x: _F64) -> _F64:
     """Eq 6.2 vectors ``(N,3)``; ``inf`` rows behind the eye."""
 
+# --- trajectory reconstruction (thesis Chapter 5) ---------------------------------------
+def reconstruct_trajectories(
+    k_intr: _F64,
+    r: _F64,
+    c: _F64,
+    times: _F64,
+    x: _F64,
+    k: int | None = None,
+    folds: int = 5,
+    k_min: int = 1,
+    k_max: int | None = None,
+    cv_rule: str = "min",
+    refine: bool = True,
+    max_iterations: int = 100,
+    keep_covariance: bool = False,
+    strict: bool = False,
+) -> dict[str, Any]:
+    """Trajectories of ``x (N,F,2)`` from cameras with capture ``times (F,)``; ``k=None``
+    chooses K per point by cross validation (Eq 5.8). A dict of arrays: ``points (N,F,3)``,
+    ``std (N,F,3)``, ``coeffs (N,Kmax,3)``, ``cv_error (N,Kcv)``, ``k``, ``rms``,
+    ``rms_linear``, ``converged``, ``iterations``, ``rank``, ``cond``, ``sigma``,
+    ``observed`` ``(N,)``, ``covariance`` (list of ``(3k,3k)`` or ``None``), ``failures``
+    (list of ``str | None``) and ``span (t0, t1, n_norm)``. ``strict=True`` raises the first
+    failure."""
+
+def reconstructability(points: _F64, centres: _F64, k: int, times: _F64 | None = None) -> float:
+    """η of Eq 5.16 for a true trajectory ``(F,3)`` and camera centres ``(F,3)``."""
+
+def null_residual(trajectory: _F64, k: int, times: _F64 | None = None) -> float:
+    """``‖Θ^⊥ β^⊥‖`` of a trajectory ``(F,3)`` with ``k`` DCT functions."""
+# --- social saliency and social charges (issue 5, thesis Chapter 6) ---
+
+def saliency_field(p: _F64, v: _F64, h: _F64, points: _F64) -> _F64:
+    """Social saliency (Eq 6.4) of rays ``p (N,3)``, unit ``v (N,3)``, ``h (N,)`` at
+    ``points (M,3)`` → ``(M,)``."""
+
+def saliency_grid(
+    p: _F64,
+    v: _F64,
+    h: _F64,
+    lo: tuple[float, float, float],
+    hi: tuple[float, float, float],
+    shape: tuple[int, int, int],
+) -> _F64:
+    """The field on the inclusive grid ``lo..hi`` with ``shape`` samples → ``shape`` array."""
+
+def find_charges(
+    p: _F64,
+    v: _F64,
+    h: _F64,
+    offsets: npt.NDArray[np.int64],
+    seed: int,
+    seeds_per_ray: int = 20,
+    depth_min: float = 0.3,
+    depth_max: float = 10.0,
+    tol: float = 1e-5,
+    newton: bool = True,
+    max_iter: int = 100,
+    merge_radius: float = 0.2,
+    member_sigma: float = 2.5,
+    min_members: int = 2,
+    exclusive: bool = True,
+    min_magnitude: float = 0.0,
+    bounds: tuple[tuple[float, float, float], tuple[float, float, float]] | None = None,
+    region_level: float = 0.8,
+    region_max_radius: float = 10.0,
+) -> tuple[
+    npt.NDArray[np.int64],
+    _F64,
+    _F64,
+    npt.NDArray[np.int64],
+    npt.NDArray[np.int64],
+    npt.NDArray[np.int64],
+    _F64,
+    _F64,
+    _F64,
+    _F64,
+]:
+    """Mode seeking (Eq 6.5–6.8) on the frames ``offsets (F+1,)`` of stacked rays →
+    ``frame (C,)``, ``position (C,3)``, ``magnitude (C,)``, ``support (C,)``, flat
+    ``members`` with ``member_offsets (C+1,)``, flat ``membership``, ``region_centre
+    (C,3)``, ``region_axes (C,3,3)``, ``region_radii (C,3)``."""
+
+def track_charges(
+    features: _F64,
+    frames: npt.NDArray[np.int64],
+    bandwidth: float = 0.3,
+    max_iter: int = 300,
+    bin_seeding: bool = True,
+) -> tuple[npt.NDArray[np.int64], _F64]:
+    """Mean-shift tracking of membership features ``(n,J)`` → track ids ``(n,)`` (−1 =
+    dropped duplicate) and centres ``(K,J)`` (Sec 6.1.3)."""
+# ---- issue 6: gaze field (thesis Chapter 7). Rays flat: p (N,3), v (N,3), members (N,)
+# dense int64 in 0..J, offsets (F+1,) int64; windows (W,3) int64 [start, end, n_charges];
+# a field as positions (F,I,3) NaN-padded, magnitudes (F,I), kappa (F,) (NaN = no field).
+
+def gaze_split_windows(counts: npt.NDArray[np.int64], min_len: int) -> npt.NDArray[np.int64]:
+    """Windows ``(W,3)`` of constant charge count (Sec 7.3.1); runs shorter than
+    ``min_len`` frames are absorbed into a neighbour."""
+
+def gaze_init(
+    p: _F64,
+    v: _F64,
+    offsets: npt.NDArray[np.int64],
+    windows: npt.NDArray[np.int64],
+    sigma: float,
+    candidates: _F64 | None = None,
+) -> _F64:
+    """Initial charge tracks ``(F,I,3)`` (NaN-padded) from ``candidates (F,C,3)`` or from
+    pairwise ray intersections scored with bandwidth ``sigma``."""
+
+def gaze_em(
+    p: _F64,
+    v: _F64,
+    members: npt.NDArray[np.int64],
+    offsets: npt.NDArray[np.int64],
+    windows: npt.NDArray[np.int64],
+    init: _F64,
+    kappa: float | None = None,
+    kappa_init: float = 10.0,
+    max_iterations: int = 200,
+    tolerance: float = 1e-7,
+    max_angle: float = 0.5235987755982988,
+    inner_iterations: int = 5,
+    lambda_g: float = 0.0,
+    filter: str = "velocity",
+    membership: str = "window",
+) -> tuple[
+    _F64,
+    _F64,
+    _F64,
+    _F64,
+    _F64,
+    _F64,
+    npt.NDArray[np.int64],
+    npt.NDArray[np.bool_],
+]:
+    """Time-windowed EM (Eq 7.10–7.14): positions ``(F,I,3)``, magnitudes ``(F,I)``, κ
+    ``(W,)``, memberships ``(W,J,I)``, responsibilities ``(N,I)``, log-likelihood ``(W,)``,
+    iterations ``(W,)``, converged ``(W,)``."""
+
+def gaze_predict(
+    positions: _F64,
+    magnitudes: _F64,
+    kappa: _F64,
+    frame: npt.NDArray[np.int64],
+    points: _F64,
+) -> _F64:
+    """Most likely directions ``(M,3)`` (Eq 7.3); NaN rows where undefined."""
+
+def gaze_log_density(
+    positions: _F64,
+    magnitudes: _F64,
+    kappa: _F64,
+    frame: npt.NDArray[np.int64],
+    p: _F64,
+    v: _F64,
+) -> _F64:
+    """``ln p(v | p)`` ``(M,)`` (Eq 7.7); NaN where the frame has no field."""
+
+def gaze_angle_to_charges(
+    positions: _F64,
+    magnitudes: _F64,
+    kappa: _F64,
+    frame: npt.NDArray[np.int64],
+    p: _F64,
+    v: _F64,
+    self_radius: float,
+) -> _F64:
+    """Radians from ``v`` to the closest charge direction ``(M,)``; NaN where none."""
 # --- binary quadratic programming and articulated motion (Chapter 4) ---
 
 def solve_bqp(
