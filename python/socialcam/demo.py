@@ -103,7 +103,8 @@ def _stage_trajectory(seed: int, out: Path, plots: bool) -> dict[str, Any]:
 
 
 def _stage_articulated(seed: int, out: Path, plots: bool) -> dict[str, Any]:
-    """The same walker seen by a single camera circling it at 3 m: each joint from its parent
+    """The same walker (1 s at 60 Hz) seen by a single camera swinging around it at 1.5 m:
+    each joint from its parent
     and bone length by the binary quadratic program of Chapter 4, recursively from the
     (known) root trajectory."""
     from socialcam.articulated import Skeleton, reconstruct_skeleton
@@ -111,12 +112,12 @@ def _stage_articulated(seed: int, out: Path, plots: bool) -> dict[str, Any]:
 
     m, P = _walker()
     skeleton, keep = Skeleton.from_bvh(m)
-    P = P[::2][:, keep]  # 30 Hz, 60 frames
+    P = P[:60][:, keep]  # 60 Hz, 60 frames
     F = P.shape[0]
     rng = np.random.default_rng(seed)
-    ang = rng.uniform(0, 2 * np.pi) + np.linspace(0.0, 3.0, F)
-    C = P[:, 0] + np.c_[3.0 * np.cos(ang), 3.0 * np.sin(ang), np.full(F, 0.4)]
-    cams = Cameras(synth.intrinsics(), synth.look_at(C, P[:, 0]), C, np.arange(F) / 30.0)
+    ang = rng.uniform(0, 2 * np.pi) + np.linspace(0.0, 1.0, F)
+    C = P[:, 0] + np.c_[1.5 * np.cos(ang), 1.5 * np.sin(ang), np.full(F, 0.3)]
+    cams = Cameras(synth.intrinsics(), synth.look_at(C, P[:, 0]), C, np.arange(F) / 60.0)
     x = synth.observe(np.transpose(P, (1, 0, 2)), cams, noise_px=0.5, seed=seed + 1).x
     t0 = time.perf_counter()
     res = reconstruct_skeleton(np.transpose(x, (1, 0, 2)), cams, skeleton, P[:, 0], k=8)
