@@ -7,10 +7,14 @@
 
 use pyo3::prelude::*;
 
+mod bqp;
 mod convert;
 mod errors;
 mod geometry;
+mod saliency;
 mod trajectory;
+// issue 6: gaze field
+mod gazefield;
 
 #[pymodule]
 fn _core(m: &Bound<'_, PyModule>) -> PyResult<()> {
@@ -18,5 +22,8 @@ fn _core(m: &Bound<'_, PyModule>) -> PyResult<()> {
     errors::register(m)?;
     geometry::register(m)?;
     trajectory::register(m)?;
+    saliency::register(m)?;
+    gazefield::register(m)?;
+    bqp::register(m)?;
     Ok(())
 }

@@ -9,6 +9,9 @@ Building blocks
 - observations: :func:`observe` → :class:`Observations` (pixel noise, missing data)
 - people: :func:`wander`, :func:`looking_at` → :class:`People` (gaze model of Sec 3.1)
 - a ready scene: :func:`multiview_scene`
+- social scenes with known joint attention: :func:`mocap_replica`, :func:`meeting`,
+  :func:`party` → :class:`SocialScene`; :func:`mafia` → :class:`MafiaScene` (with
+  inattentive players)
 """
 
 from __future__ import annotations
@@ -25,9 +28,11 @@ from socialcam.synth.cameras import (
     smooth_path,
     walking_head,
 )
+from socialcam.synth.mafia import MafiaScene, mafia
 from socialcam.synth.observe import Observations, observe
 from socialcam.synth.people import People, looking_at, primary_from_true, wander
 from socialcam.synth.points import random_points, smooth_trajectories
+from socialcam.synth.social import SocialScene, meeting, mocap_replica, party
 
 
 @dataclass(frozen=True)
@@ -55,15 +60,22 @@ def multiview_scene(
 
 
 __all__ = [
+    "MafiaScene",
     "MultiviewScene",
     "Observations",
     "People",
+    # social scenes (issue 5)
+    "SocialScene",
     "head_mounted",
     "intrinsics",
     "look_at",
     "looking_at",
+    "mafia",
+    "meeting",
+    "mocap_replica",
     "multiview_scene",
     "observe",
+    "party",
     "primary_from_true",
     "random_photographers",
     "random_points",

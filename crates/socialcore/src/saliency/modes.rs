@@ -1,0 +1,812 @@
+//! Social charges: the modes of the saliency field, found by the ray mean-shift of
+//! Eq 6.5–6.7 from seeds sampled along every gaze ray (Sec 6.2).
+
+use super::field::{ray_hessian, saliency, INV_SQRT_2PI, Q_CUTOFF};
+use super::GazeRays;
+use crate::error::{Error, Result};
+use nalgebra::{Matrix3, SymmetricEigen, Vector3};
+use rand::{Rng, SeedableRng};
+use rand_chacha::ChaCha8Rng;
+use rayon::prelude::*;
+
+/// Settings of [`find_charges`]. The defaults suit people in a room (metres).
+#[derive(Debug, Clone, PartialEq)]
+pub struct ModeOptions {
+    /// Seeds per ray, stratified in depth along the ray (Sec 6.2: "we sample several points
+    /// on the primary gaze rays").
+    pub seeds_per_ray: usize,
+    /// Depth range `[depth_min, depth_max]` (metres from the eye) of the seeds.
+    pub depth_min: f64,
+    pub depth_max: f64,
+    /// A seed has converged when an iteration moves it less than `tol` metres.
+    pub tol: f64,
+    /// Accelerate Eq 6.7 with Newton steps inside a mode's basin (see `climb`); `false`
+    /// runs the plain update of Eq 6.7 (slow along elongated modes).
+    pub newton: bool,
+    /// Iteration cap per seed; seeds that reach it (slow drift along a lone ray's ridge)
+    /// are dropped.
+    pub max_iter: usize,
+    /// Converged seeds closer than this (metres) to an earlier mode, in seed order, are the
+    /// same mode; the mode keeps the position with the higher field value.
+    pub merge_radius: f64,
+    /// A ray is a member of a charge when the charge lies within `member_sigma` bandwidths
+    /// of it (`‖d/h‖ ≤ member_sigma`, Eq 6.2).
+    pub member_sigma: f64,
+    /// Charges with fewer member rays are rejected (Sec 6.2: more than one gaze ray must
+    /// contribute), so the default is 2.
+    pub min_members: usize,
+    /// Winner-take-all membership: a ray counts as a member only of the strongest charge
+    /// it is within `member_sigma` of (a person attends to one thing at a time, Ch 7).
+    /// Charges are accepted strongest first and `min_members` applies to the rays still
+    /// free. This rejects the spurious "charges" where rays of two different groups cross
+    /// behind their own targets. `false` gives the thesis' rule: every ray within
+    /// `member_sigma` counts.
+    pub exclusive: bool,
+    /// Charges whose field value is below this are rejected.
+    pub min_magnitude: f64,
+    /// Optional box `(lo, hi)` outside of which modes are rejected (for example a room).
+    pub bounds: Option<(Vector3<f64>, Vector3<f64>)>,
+    /// The confidence region is where the field exceeds `region_level` times the mode
+    /// value (Sec 6.2.1 uses 0.8).
+    pub region_level: f64,
+    /// The region's semi-axes are capped at this many metres.
+    pub region_max_radius: f64,
+}
+
+impl Default for ModeOptions {
+    fn default() -> Self {
+        ModeOptions {
+            seeds_per_ray: 20,
+            depth_min: 0.3,
+            depth_max: 10.0,
+            tol: 1e-5,
+            newton: true,
+            max_iter: 100,
+            merge_radius: 0.2,
+            member_sigma: 2.5,
+            min_members: 2,
+            exclusive: true,
+            min_magnitude: 0.0,
+            bounds: None,
+            region_level: 0.8,
+            region_max_radius: 10.0,
+        }
+    }
+}
+
+impl ModeOptions {
+    /// Checks every setting, naming the first bad one.
+    pub fn validate(&self) -> Result<()> {
+        let bad = |arg: &str, msg: String| Err(Error::invalid(arg, msg));
+        if self.seeds_per_ray == 0 {
+            return bad("seeds_per_ray", "must be at least 1".into());
+        }
+        if !(self.depth_min.is_finite() && self.depth_min > 0.0) {
+            return bad(
+                "depth_min",
+                format!("{} must be finite and > 0", self.depth_min),
+            );
+        }
+        if !(self.depth_max.is_finite() && self.depth_max >= self.depth_min) {
+            return bad(
+                "depth_max",
+                format!(
+                    "{} must be finite and ≥ depth_min {}",
+                    self.depth_max, self.depth_min
+                ),
+            );
+        }
+        if !(self.tol.is_finite() && self.tol > 0.0) {
+            return bad("tol", format!("{} must be finite and > 0", self.tol));
+        }
+        if self.max_iter == 0 {
+            return bad("max_iter", "must be at least 1".into());
+        }
+        if !(self.merge_radius.is_finite() && self.merge_radius >= 0.0) {
+            return bad(
+                "merge_radius",
+                format!("{} must be finite and ≥ 0", self.merge_radius),
+            );
+        }
+        if !(self.member_sigma.is_finite() && self.member_sigma > 0.0) {
+            return bad(
+                "member_sigma",
+                format!("{} must be finite and > 0", self.member_sigma),
+            );
+        }
+        if self.min_members == 0 {
+            return bad("min_members", "must be at least 1".into());
+        }
+        if !self.min_magnitude.is_finite() {
+            return bad("min_magnitude", "must be finite".into());
+        }
+        if let Some((lo, hi)) = &self.bounds {
+            if !(lo.iter().chain(hi.iter()).all(|x| x.is_finite())
+                && (0..3).all(|a| lo[a] <= hi[a]))
+            {
+                return bad("bounds", "must be finite with lo ≤ hi on every axis".into());
+            }
+        }
+        if !(self.region_level > 0.0 && self.region_level < 1.0) {
+            return bad(
+                "region_level",
+                format!("{} must lie in (0, 1)", self.region_level),
+            );
+        }
+        if !(self.region_max_radius.is_finite() && self.region_max_radius > 0.0) {
+            return bad(
+                "region_max_radius",
+                format!("{} must be finite and > 0", self.region_max_radius),
+            );
+        }
+        Ok(())
+    }
+}
+
+/// An ellipsoid `{x : Σₖ ((x − c)ᵀaₖ / rₖ)² ≤ 1}` with unit axes `aₖ` (columns of
+/// `axes`) and semi-axes `rₖ`.
+#[derive(Debug, Clone, Copy, PartialEq)]
+pub struct Ellipsoid {
+    pub centre: Vector3<f64>,
+    pub axes: Matrix3<f64>,
+    pub radii: Vector3<f64>,
+}
+
+impl Ellipsoid {
+    /// Whether `x` lies inside (or on) the ellipsoid.
+    pub fn contains(&self, x: &Vector3<f64>) -> bool {
+        let d = self.axes.transpose() * (x - self.centre);
+        (0..3).map(|k| (d[k] / self.radii[k]).powi(2)).sum::<f64>() <= 1.0
+    }
+}
+
+/// One social charge of a frame.
+#[derive(Debug, Clone, PartialEq)]
+pub struct Charge {
+    /// The mode of the saliency field (metres).
+    pub position: Vector3<f64>,
+    /// The field value there, `f(x)` of Eq 6.4: the charge's strength.
+    pub magnitude: f64,
+    /// Indices (into the frame's rays, ascending) of the member rays.
+    pub members: Vec<usize>,
+    /// The membership feature of Eq 6.8: `fᵢ(x)` over all rays of the frame, unit norm.
+    pub membership: Vec<f64>,
+    /// How many seeds converged to this charge.
+    pub support: usize,
+    /// The region where the field exceeds `region_level · magnitude`, as an ellipsoid:
+    /// axes along the eigenvectors of the field's Hessian at the mode, extents found by
+    /// bisection of the actual field along each of them (both ways).
+    pub region: Ellipsoid,
+}
+
+/// What one evaluation gives the iteration: `Σ fᵢ` (times `N`, the field), and the
+/// numerator and denominator of Eq 6.7.
+struct ShiftTerms {
+    field_sum: f64,
+    num: Vector3<f64>,
+    den: f64,
+}
+
+/// Below this depth (metres) a ray's weight `1/s²` of Eq 6.6 is not used (the eye itself).
+const MIN_DEPTH: f64 = 1e-12;
+
+/// Evaluates the terms of Eq 6.6–6.7 at `x`: for each ray with `s = (x − p)ᵀv > 0`,
+/// `wᵢ = g(‖d/h‖²)/(h³ s²)` with `g(u) ∝ e^{−u/2}` and `x̃ᵢ = x̂ᵢ + (‖x − x̂ᵢ‖²/s) v`.
+#[inline]
+fn shift_terms(rays: &GazeRays, x: &Vector3<f64>) -> ShiftTerms {
+    let mut t = ShiftTerms {
+        field_sum: 0.0,
+        num: Vector3::zeros(),
+        den: 0.0,
+    };
+    for i in 0..rays.len() {
+        let (p, v, h) = (&rays.p[i], &rays.v[i], rays.h[i]);
+        let w = x - p;
+        let s = w.dot(v);
+        if s < 0.0 {
+            continue; // behind the eye: d = ∞ (Eq 6.2)
+        }
+        let perp = w - v * s;
+        let pp = perp.norm_squared();
+        if s < MIN_DEPTH {
+            if pp == 0.0 {
+                t.field_sum += INV_SQRT_2PI / h;
+            }
+            continue;
+        }
+        let q = pp / (s * s * h * h);
+        if q > Q_CUTOFF {
+            continue;
+        }
+        let e = (-0.5 * q).exp();
+        t.field_sum += e * INV_SQRT_2PI / h;
+        let wi = e / (h * h * h * s * s);
+        let x_tilde = x - perp + v * (pp / s);
+        t.num += x_tilde * wi;
+        t.den += wi;
+    }
+    t
+}
+
+/// Outcome of one seed's climb.
+struct Climb {
+    x: Vector3<f64>,
+    value: f64,
+    converged: bool,
+}
+
+/// Relative field gain per iteration below which a climb counts as converged.
+const STALL_GAIN: f64 = 1e-10;
+
+/// Largest number of step halvings when an update of Eq 6.7 would lower the field.
+const MAX_HALVINGS: usize = 30;
+
+/// [`ShiftTerms`] plus `N·∇f(x)` and `N·∇²f(x)` in closed form (see [`ray_hessian`] for
+/// the terms), in one pass over the rays.
+struct FullTerms {
+    shift: ShiftTerms,
+    grad: Vector3<f64>,
+    hess: Matrix3<f64>,
+}
+
+fn full_terms(rays: &GazeRays, x: &Vector3<f64>) -> FullTerms {
+    let mut t = FullTerms {
+        shift: ShiftTerms {
+            field_sum: 0.0,
+            num: Vector3::zeros(),
+            den: 0.0,
+        },
+        grad: Vector3::zeros(),
+        hess: Matrix3::zeros(),
+    };
+    for i in 0..rays.len() {
+        let (p, v, h) = (&rays.p[i], &rays.v[i], rays.h[i]);
+        let w = x - p;
+        let s = w.dot(v);
+        if s < 0.0 {
+            continue;
+        }
+        let perp = w - v * s;
+        let pp = perp.norm_squared();
+        if s < MIN_DEPTH {
+            if pp == 0.0 {
+                t.shift.field_sum += INV_SQRT_2PI / h;
+            }
+            continue;
+        }
+        let h2 = h * h;
+        let s2 = s * s;
+        let q = pp / (s2 * h2);
+        if q > Q_CUTOFF {
+            continue;
+        }
+        let e = (-0.5 * q).exp();
+        let fi = e * INV_SQRT_2PI / h;
+        t.shift.field_sum += fi;
+        let wi = e / (h2 * h * s2);
+        t.shift.num += (x - perp + v * (pp / s)) * wi;
+        t.shift.den += wi;
+        let ww = pp + s2;
+        let grad_q = (w - v * (ww / s)) * (2.0 / (h2 * s2));
+        let hess_q = (Matrix3::identity() / s2
+            - (w * v.transpose() + v * w.transpose()) * (2.0 / (s2 * s))
+            + v * v.transpose() * (3.0 * ww / (s2 * s2)))
+            * (2.0 / h2);
+        t.grad -= grad_q * (0.5 * fi);
+        t.hess += (grad_q * grad_q.transpose() * 0.25 - hess_q * 0.5) * fi;
+    }
+    t
+}
+
+/// Climbs from `x0` with the mean-shift update of Eq 6.7, accelerated near a mode.
+///
+/// Eq 6.7 converges only linearly, and very slowly along the long axis of the elongated
+/// modes that nearly parallel rays make. So each iteration first tries the Newton step
+/// `−(∇²f)⁻¹∇f` where the Hessian is negative definite (inside the mode's basin), and
+/// takes it if it raises the field; otherwise it takes the Eq 6.7 step, halved until it
+/// does not lower the field (the ray kernel is not a classic mean-shift kernel, so ascent
+/// is not guaranteed by theory). If no halving helps, `x` is a numerical maximum.
+fn climb(rays: &GazeRays, x0: Vector3<f64>, opts: &ModeOptions) -> Climb {
+    let n = rays.len() as f64;
+    let eval = |x: &Vector3<f64>| {
+        if opts.newton {
+            full_terms(rays, x)
+        } else {
+            FullTerms {
+                shift: shift_terms(rays, x),
+                grad: Vector3::zeros(),
+                hess: Matrix3::zeros(),
+            }
+        }
+    };
+    let mut x = x0;
+    let mut terms = eval(&x);
+    for _ in 0..opts.max_iter {
+        let here = &terms.shift;
+        if here.den <= 0.0 {
+            return Climb {
+                x,
+                value: here.field_sum / n,
+                converged: false,
+            };
+        }
+        let mut next = None;
+        let mut moved = 0.0;
+        if opts.newton {
+            if let Some(chol) = (-terms.hess).cholesky() {
+                let step = chol.solve(&terms.grad);
+                let xn = x + step;
+                let tn = eval(&xn);
+                if tn.shift.field_sum >= here.field_sum {
+                    moved = step.norm();
+                    next = Some((xn, tn));
+                }
+            }
+        }
+        if next.is_none() {
+            let mut step = here.num / here.den - x;
+            for _ in 0..MAX_HALVINGS {
+                let xn = x + step;
+                let tn = eval(&xn);
+                if tn.shift.field_sum >= here.field_sum * (1.0 - 1e-12) {
+                    moved = step.norm();
+                    next = Some((xn, tn));
+                    break;
+                }
+                step *= 0.5;
+            }
+        }
+        let Some((xn, tn)) = next else {
+            return Climb {
+                x,
+                value: here.field_sum / n,
+                converged: true,
+            };
+        };
+        // Converged when the step is below `tol`, or when the field no longer grows
+        // (relative gain ≤ STALL_GAIN): a seed stalled on a lone ray's ridge, far from
+        // every other ray, creeps by steps above `tol` for ever.
+        let gain = tn.shift.field_sum - here.field_sum;
+        let stalled = gain <= STALL_GAIN * here.field_sum;
+        x = xn;
+        terms = tn;
+        if moved < opts.tol || stalled {
+            return Climb {
+                x,
+                value: terms.shift.field_sum / n,
+                converged: true,
+            };
+        }
+    }
+    Climb {
+        x,
+        value: terms.shift.field_sum / n,
+        converged: false,
+    }
+}
+
+/// The seeds of ray `i`: `seeds_per_ray` depths, one uniform draw in each of as many equal
+/// strata of `[depth_min, depth_max]`, from a ChaCha8 stream of its own (`seed`, stream
+/// `i`), so seeds never depend on the thread count or on the other rays.
+fn seeds_of_ray(rays: &GazeRays, i: usize, opts: &ModeOptions, seed: u64) -> Vec<Vector3<f64>> {
+    let mut rng = ChaCha8Rng::seed_from_u64(seed);
+    rng.set_stream(i as u64);
+    let n = opts.seeds_per_ray;
+    let span = opts.depth_max - opts.depth_min;
+    (0..n)
+        .map(|j| {
+            let u: f64 = rng.random();
+            let depth = opts.depth_min + span * (j as f64 + u) / n as f64;
+            rays.p[i] + rays.v[i] * depth
+        })
+        .collect()
+}
+
+/// The finished charge at a mode `x` (field value `value`), or `None` if it is rejected.
+fn make_charge(
+    rays: &GazeRays,
+    x: Vector3<f64>,
+    value: f64,
+    support: usize,
+    opts: &ModeOptions,
+) -> Option<Charge> {
+    if value < opts.min_magnitude || value <= 0.0 {
+        return None;
+    }
+    if let Some((lo, hi)) = &opts.bounds {
+        if (0..3).any(|a| x[a] < lo[a] || x[a] > hi[a]) {
+            return None;
+        }
+    }
+    let n = rays.len();
+    let mut members = Vec::new();
+    let mut fi = Vec::with_capacity(n);
+    for i in 0..n {
+        fi.push(super::field::ray_density(rays, i, &x));
+        if let Some(d) = crate::geometry::perspective_distance(&rays.p[i], &rays.v[i], &x) {
+            if d.norm() <= opts.member_sigma * rays.h[i] {
+                members.push(i);
+            }
+        }
+    }
+    if members.len() < opts.min_members {
+        return None;
+    }
+    let norm = fi.iter().map(|f| f * f).sum::<f64>().sqrt();
+    let membership = fi.iter().map(|f| f / norm).collect();
+    Some(Charge {
+        position: x,
+        magnitude: value,
+        members,
+        membership,
+        support,
+        // Filled in once the charge is accepted (see `charges_of_frame`).
+        region: Ellipsoid {
+            centre: x,
+            axes: Matrix3::identity(),
+            radii: Vector3::zeros(),
+        },
+    })
+}
+
+/// Distance from `x` along unit `u` at which the field first falls to `level`, found by
+/// doubling from `guess` and then bisection; capped at `cap`.
+fn crossing(
+    rays: &GazeRays,
+    x: &Vector3<f64>,
+    u: &Vector3<f64>,
+    level: f64,
+    guess: f64,
+    cap: f64,
+) -> f64 {
+    let above = |t: f64| saliency(rays, &(x + u * t)) >= level;
+    let mut lo = 0.0;
+    let mut hi = guess.min(cap);
+    while above(hi) {
+        if hi >= cap {
+            return cap;
+        }
+        lo = hi;
+        hi = (hi * 2.0).min(cap);
+    }
+    for _ in 0..60 {
+        if hi - lo <= 1e-6 * hi {
+            break;
+        }
+        let mid = 0.5 * (lo + hi);
+        if above(mid) {
+            lo = mid;
+        } else {
+            hi = mid;
+        }
+    }
+    0.5 * (lo + hi)
+}
+
+/// The confidence region `{f ≥ level · f(mode)}` summarised as an ellipsoid (see
+/// [`Charge::region`]).
+fn confidence_region(
+    rays: &GazeRays,
+    x: &Vector3<f64>,
+    value: f64,
+    opts: &ModeOptions,
+) -> Ellipsoid {
+    let eig = SymmetricEigen::new(-ray_hessian(rays, x));
+    let level = opts.region_level * value;
+    let cap = opts.region_max_radius;
+    let mut centre = *x;
+    let mut radii = Vector3::zeros();
+    for k in 0..3 {
+        let u: Vector3<f64> = eig.eigenvectors.column(k).into_owned();
+        let lam = eig.eigenvalues[k];
+        // Quadratic model f(x + tu) ≈ f − ½λt² gives the first guess.
+        let guess = if lam > 0.0 {
+            (2.0 * (1.0 - opts.region_level) * value / lam).sqrt()
+        } else {
+            cap / 16.0
+        };
+        let guess = if guess.is_finite() && guess > 0.0 {
+            guess
+        } else {
+            cap / 16.0
+        };
+        let plus = crossing(rays, x, &u, level, guess, cap);
+        let minus = crossing(rays, x, &(-u), level, guess, cap);
+        radii[k] = 0.5 * (plus + minus);
+        centre += u * (0.5 * (plus - minus));
+    }
+    Ellipsoid {
+        centre,
+        axes: eig.eigenvectors,
+        radii,
+    }
+}
+
+fn charges_of_frame(rays: &GazeRays, opts: &ModeOptions, seed: u64, parallel: bool) -> Vec<Charge> {
+    let seeds: Vec<Vector3<f64>> = (0..rays.len())
+        .flat_map(|i| seeds_of_ray(rays, i, opts, seed))
+        .collect();
+    let climbs: Vec<Climb> = if parallel {
+        seeds.par_iter().map(|s| climb(rays, *s, opts)).collect()
+    } else {
+        seeds.iter().map(|s| climb(rays, *s, opts)).collect()
+    };
+    // Merge in seed order: the result never depends on how the climbs were scheduled.
+    let mut modes: Vec<(Vector3<f64>, f64, usize)> = Vec::new();
+    for c in climbs.iter().filter(|c| c.converged) {
+        match modes
+            .iter_mut()
+            .find(|m| (m.0 - c.x).norm() <= opts.merge_radius)
+        {
+            Some(m) => {
+                m.2 += 1;
+                if c.value > m.1 {
+                    m.0 = c.x;
+                    m.1 = c.value;
+                }
+            }
+            None => modes.push((c.x, c.value, 1)),
+        }
+    }
+    let candidates: Vec<Charge> = modes
+        .into_iter()
+        .filter_map(|(x, value, support)| make_charge(rays, x, value, support, opts))
+        .collect();
+    // Strongest first; exact ties broken by position so the order is total.
+    let mut candidates = candidates;
+    candidates.sort_by(|a, b| {
+        b.magnitude
+            .total_cmp(&a.magnitude)
+            .then_with(|| a.position.x.total_cmp(&b.position.x))
+            .then_with(|| a.position.y.total_cmp(&b.position.y))
+            .then_with(|| a.position.z.total_cmp(&b.position.z))
+    });
+    let mut charges = if opts.exclusive {
+        let mut taken = vec![false; rays.len()];
+        let mut kept = Vec::with_capacity(candidates.len());
+        for mut c in candidates {
+            c.members.retain(|&i| !taken[i]);
+            if c.members.len() >= opts.min_members {
+                c.members.iter().for_each(|&i| taken[i] = true);
+                kept.push(c);
+            }
+        }
+        kept
+    } else {
+        candidates
+    };
+    for c in charges.iter_mut() {
+        c.region = confidence_region(rays, &c.position, c.magnitude, opts);
+    }
+    charges
+}
+
+/// The social charges of one frame (Sec 6.1.2): mean-shift (Eq 6.7) from seeds along every
+/// ray, parallel over seeds; modes merged within `merge_radius` in seed order; modes with
+/// fewer than `min_members` member rays, below `min_magnitude` or outside `bounds`
+/// rejected. Sorted by magnitude, strongest first. A single ray, or rays that never meet,
+/// give an empty list. Same `seed`, same result, whatever the thread count.
+pub fn find_charges(rays: &GazeRays, opts: &ModeOptions, seed: u64) -> Result<Vec<Charge>> {
+    opts.validate()?;
+    Ok(charges_of_frame(rays, opts, seed, true))
+}
+
+/// [`find_charges`] on every frame of a sequence, parallel over frames; frame `t` gives
+/// exactly what `find_charges(&frames[t], opts, seed)` gives.
+pub fn find_charges_sequence(
+    frames: &[GazeRays],
+    opts: &ModeOptions,
+    seed: u64,
+) -> Result<Vec<Vec<Charge>>> {
+    opts.validate()?;
+    Ok(frames
+        .par_iter()
+        .map(|rays| charges_of_frame(rays, opts, seed, false))
+        .collect())
+}
+
+#[cfg(test)]
+#[allow(clippy::unwrap_used)]
+mod tests {
+    use super::*;
+    use approx::assert_relative_eq;
+
+    /// Rays from eyes `eyes` towards `target`, each turned by a small known angle.
+    fn rays_at(eyes: &[Vector3<f64>], target: Vector3<f64>, h: f64, id0: i64) -> GazeRays {
+        let v = eyes.iter().map(|p| (target - p).normalize()).collect();
+        let ids = (0..eyes.len() as i64).map(|i| i + id0).collect();
+        GazeRays::new(eyes.to_vec(), v, vec![h; eyes.len()], Some(ids)).unwrap()
+    }
+
+    fn circle(n: usize, r: f64, centre: Vector3<f64>, z: f64, phase: f64) -> Vec<Vector3<f64>> {
+        (0..n)
+            .map(|i| {
+                let a = phase + i as f64 * std::f64::consts::TAU / n as f64;
+                centre + Vector3::new(r * a.cos(), r * a.sin(), z)
+            })
+            .collect()
+    }
+
+    fn concat(a: &GazeRays, b: &GazeRays) -> GazeRays {
+        GazeRays::new(
+            [a.p.clone(), b.p.clone()].concat(),
+            [a.v.clone(), b.v.clone()].concat(),
+            [a.h.clone(), b.h.clone()].concat(),
+            Some([a.ids.clone(), b.ids.clone()].concat()),
+        )
+        .unwrap()
+    }
+
+    #[test]
+    fn exact_rays_give_their_meeting_point() {
+        let t = Vector3::new(1.0, 2.0, 1.0);
+        let rays = rays_at(&circle(5, 2.5, t, 0.6, 0.3), t, 0.1, 0);
+        let charges = find_charges(&rays, &ModeOptions::default(), 1).unwrap();
+        assert_eq!(charges.len(), 1);
+        let c = &charges[0];
+        assert!((c.position - t).norm() < 1e-4, "{:?}", c.position);
+        assert_eq!(c.members, vec![0, 1, 2, 3, 4]);
+        assert_relative_eq!(c.magnitude, INV_SQRT_2PI / 0.1, epsilon = 1e-6);
+        assert_relative_eq!(
+            c.membership.iter().map(|m| m * m).sum::<f64>(),
+            1.0,
+            epsilon = 1e-12
+        );
+        assert!(c.region.contains(&t));
+        assert!(!c.region.contains(&(t + Vector3::new(0.0, 0.0, 1.0))));
+        // The region boundary really is at 80 % of the peak along each axis.
+        for k in 0..3 {
+            let u: Vector3<f64> = c.region.axes.column(k).into_owned();
+            let b = c.region.centre + u * c.region.radii[k];
+            let ratio = saliency(&rays, &b) / c.magnitude;
+            assert!((ratio - 0.8).abs() < 0.05, "axis {k}: {ratio}");
+        }
+    }
+
+    #[test]
+    fn two_groups_give_two_charges_with_their_members() {
+        let ta = Vector3::new(0.0, 0.0, 1.0);
+        let tb = Vector3::new(6.0, 1.0, 1.2);
+        let a = rays_at(&circle(4, 1.5, ta, 0.6, 0.1), ta, 0.08, 0);
+        let b = rays_at(&circle(3, 1.2, tb, 0.5, 0.4), tb, 0.08, 10);
+        let rays = concat(&a, &b);
+        let charges = find_charges(&rays, &ModeOptions::default(), 3).unwrap();
+        assert_eq!(charges.len(), 2);
+        let ca = charges
+            .iter()
+            .find(|c| (c.position - ta).norm() < 1e-3)
+            .unwrap();
+        let cb = charges
+            .iter()
+            .find(|c| (c.position - tb).norm() < 1e-3)
+            .unwrap();
+        assert_eq!(ca.members, vec![0, 1, 2, 3]);
+        assert_eq!(cb.members, vec![4, 5, 6]);
+        // Stronger group first: 4 of 7 rays against 3 of 7.
+        assert!(ca.magnitude > cb.magnitude);
+        assert_eq!(charges[0], *ca);
+        // Membership: large on members, negligible on the others.
+        assert!(ca.membership[..4].iter().all(|&m| m > 0.45));
+        assert!(ca.membership[4..].iter().all(|&m| m < 0.05));
+        // Ray 2 (group A) and ray 4 (group B) cross below the floor, behind their targets:
+        // a mode fed by two rays. Winner-take-all membership rejects it (both rays belong to
+        // stronger charges); the thesis' rule keeps it; so does a box that excludes it.
+        let o = ModeOptions {
+            exclusive: false,
+            ..Default::default()
+        };
+        let all = find_charges(&rays, &o, 3).unwrap();
+        assert_eq!(all.len(), 3);
+        assert_eq!(all[2].members, vec![2, 4]);
+        assert!(all[2].position.z < 0.0);
+        let o = ModeOptions {
+            bounds: Some((Vector3::new(-9.0, -9.0, 0.0), Vector3::new(9.0, 9.0, 3.0))),
+            ..o
+        };
+        assert_eq!(find_charges(&rays, &o, 3).unwrap().len(), 2);
+    }
+
+    #[test]
+    fn lone_ray_and_rays_that_never_meet_give_nothing() {
+        let one = rays_at(&[Vector3::zeros()], Vector3::x(), 0.1, 0);
+        assert!(find_charges(&one, &ModeOptions::default(), 0)
+            .unwrap()
+            .is_empty());
+        // Parallel rays, far apart, and rays pointing away from each other.
+        let p = vec![
+            Vector3::zeros(),
+            Vector3::new(0.0, 5.0, 0.0),
+            Vector3::new(9.0, -3.0, 0.0),
+        ];
+        let v = vec![Vector3::x(), Vector3::x(), Vector3::x()];
+        let rays = GazeRays::new(p, v, vec![0.05; 3], None).unwrap();
+        assert!(find_charges(&rays, &ModeOptions::default(), 0)
+            .unwrap()
+            .is_empty());
+        let p = vec![Vector3::zeros(), Vector3::new(1.0, 0.0, 0.0)];
+        let v = vec![-Vector3::x(), Vector3::x()];
+        let rays = GazeRays::new(p, v, vec![0.1; 2], None).unwrap();
+        assert!(find_charges(&rays, &ModeOptions::default(), 0)
+            .unwrap()
+            .is_empty());
+    }
+
+    #[test]
+    fn min_members_and_bounds_filter() {
+        let t = Vector3::new(0.0, 0.0, 1.0);
+        let rays = rays_at(&circle(3, 2.0, t, 0.5, 0.0), t, 0.1, 0);
+        let mut o = ModeOptions {
+            min_members: 4,
+            ..Default::default()
+        };
+        assert!(find_charges(&rays, &o, 0).unwrap().is_empty());
+        o.min_members = 3;
+        assert_eq!(find_charges(&rays, &o, 0).unwrap().len(), 1);
+        o.bounds = Some((Vector3::new(1.0, -5.0, -5.0), Vector3::new(5.0, 5.0, 5.0)));
+        assert!(find_charges(&rays, &o, 0).unwrap().is_empty());
+    }
+
+    #[test]
+    fn deterministic_and_sequence_matches_frames() {
+        let t = Vector3::new(0.3, -0.2, 1.1);
+        // Noisy directions: turn each ray by a fixed small angle.
+        let mut rays = rays_at(&circle(6, 3.0, t, 0.5, 0.2), t, 0.1, 0);
+        for (k, v) in rays.v.iter_mut().enumerate() {
+            let e = v.cross(&Vector3::z()).normalize();
+            *v = (*v + e * (0.05 * ((k as f64) - 2.5))).normalize();
+        }
+        let o = ModeOptions::default();
+        let a = find_charges(&rays, &o, 11).unwrap();
+        let b = find_charges(&rays, &o, 11).unwrap();
+        assert_eq!(a, b);
+        let one_thread = rayon::ThreadPoolBuilder::new()
+            .num_threads(1)
+            .build()
+            .unwrap()
+            .install(|| find_charges(&rays, &o, 11).unwrap());
+        assert_eq!(a, one_thread);
+        let seq = find_charges_sequence(&[rays.clone(), rays.clone()], &o, 11).unwrap();
+        assert_eq!(seq, vec![a.clone(), a]);
+    }
+
+    #[test]
+    fn bad_options_are_refused() {
+        let rays = rays_at(
+            &circle(3, 2.0, Vector3::zeros(), 0.5, 0.0),
+            Vector3::zeros(),
+            0.1,
+            0,
+        );
+        for o in [
+            ModeOptions {
+                seeds_per_ray: 0,
+                ..Default::default()
+            },
+            ModeOptions {
+                depth_min: 0.0,
+                ..Default::default()
+            },
+            ModeOptions {
+                depth_max: 0.1,
+                ..Default::default()
+            },
+            ModeOptions {
+                tol: f64::NAN,
+                ..Default::default()
+            },
+            ModeOptions {
+                region_level: 1.0,
+                ..Default::default()
+            },
+            ModeOptions {
+                min_members: 0,
+                ..Default::default()
+            },
+        ] {
+            assert!(matches!(
+                find_charges(&rays, &o, 0),
+                Err(Error::InvalidInput { .. })
+            ));
+        }
+    }
+}

@@ -1,0 +1,616 @@
+"""Social saliency and social charges: 3D joint attention (thesis Chapter 6).
+
+A frame's primary gaze rays (:class:`GazeRays`, Sec 3.1) induce the social saliency field
+of Eq 6.1–6.4 (:func:`saliency_field`, :func:`saliency_grid`): a cone-shaped Gaussian about
+every ray, averaged over the rays. Its modes, found by the ray mean-shift of Eq 6.5–6.7,
+are the social charges (:func:`find_charges`, :func:`find_charges_sequence`); each carries
+its membership feature (Eq 6.8) and an 80 % confidence region. Classic mean-shift on the
+membership features links charges over time (:func:`track_charges`, Sec 6.1.3).
+
+All kernels run in the Rust core with the GIL released, in parallel; results do not
+depend on the thread count.
+"""
+
+from __future__ import annotations
+
+from collections.abc import Sequence
+from dataclasses import InitVar, dataclass, field
+from typing import TYPE_CHECKING, Any
+
+import numpy as np
+import numpy.typing as npt
+
+from socialcam import _core
+from socialcam._validate import FloatArray, as_float_array, check_seed, readonly
+
+if TYPE_CHECKING:
+    from matplotlib.axes import Axes
+    from matplotlib.figure import Figure
+
+IntArray = npt.NDArray[np.int64]
+
+#: How far ``‖v‖`` may be from 1 (same tolerance as the core).
+UNIT_TOLERANCE = 1e-6
+
+
+@dataclass(frozen=True)
+class GazeRays:
+    """The primary gaze rays of one frame (Sec 3.1).
+
+    Parameters
+    ----------
+    p : (N, 3) eye centres, metres
+    v : (N, 3) unit gaze directions (an error if not unit, unless ``normalize=True``)
+    h : float or (N,) bandwidths > 0: std of eye-in-head deviation on the plane at unit
+        distance from the eye (radians, roughly)
+    ids : (N,) integer person ids (default ``0..N-1``); used to follow people across frames
+    normalize : scale ``v`` to unit length instead of refusing it
+    """
+
+    p: FloatArray
+    v: FloatArray
+    h: FloatArray
+    ids: IntArray = field(default=None)  # type: ignore[assignment]
+    normalize: InitVar[bool] = False
+
+    def __post_init__(self, normalize: bool) -> None:
+        p = as_float_array(self.p, "p", (None, 3))
+        n = p.shape[0]
+        if n == 0:
+            raise ValueError("p: need at least one gaze ray, got 0")
+        v = as_float_array(self.v, "v", (n, 3))
+        norms = np.linalg.norm(v, axis=1)
+        if normalize:
+            if (norms == 0).any():
+                raise ValueError(f"v: direction {int(np.argmin(norms))} is zero")
+            v = v / norms[:, None]
+        elif (np.abs(norms - 1.0) > UNIT_TOLERANCE).any():
+            i = int(np.argmax(np.abs(norms - 1.0)))
+            raise ValueError(
+                f"v: direction {i} has norm {norms[i]:.6g}; directions must be unit "
+                "(pass normalize=True to scale them)"
+            )
+        h = np.asarray(self.h, dtype=np.float64)
+        if h.ndim == 0:
+            h = np.full(n, float(h))
+        h = as_float_array(h, "h", (n,))
+        if (h <= 0).any():
+            raise ValueError(f"h: bandwidths must be > 0, got {h[h <= 0][0]!r}")
+        if self.ids is None:
+            ids = np.arange(n, dtype=np.int64)
+        else:
+            ids_in = np.asarray(self.ids)
+            if ids_in.shape != (n,) or not np.issubdtype(ids_in.dtype, np.integer):
+                raise ValueError(
+                    f"ids: expected {n} integer ids, got {ids_in.shape} {ids_in.dtype}"
+                )
+            ids = ids_in.astype(np.int64)
+            if len(np.unique(ids)) != n:
+                raise ValueError("ids: person ids must be distinct within a frame")
+        for name, arr in (("p", p), ("v", v), ("h", h), ("ids", ids)):
+            object.__setattr__(self, name, readonly(np.ascontiguousarray(arr)))
+
+    def __len__(self) -> int:
+        return int(self.p.shape[0])
+
+    def to_dict(self) -> dict[str, Any]:
+        return {k: getattr(self, k).tolist() for k in ("p", "v", "h", "ids")}
+
+
+def _rays(rays: GazeRays | tuple[Any, ...]) -> GazeRays:
+    if isinstance(rays, GazeRays):
+        return rays
+    return GazeRays(*rays)
+
+
+def saliency_field(rays: GazeRays, points: npt.ArrayLike) -> FloatArray:
+    """The social saliency field (Eq 6.4) at ``points``.
+
+    ``f(x) = (1/N) Σᵢ exp(−½‖dᵢ(x)‖²/hᵢ²) / (hᵢ√(2π))`` with the perspective distance
+    vector ``dᵢ`` of Eq 6.2 (a point behind an eye gets nothing from that ray; at an eye
+    ``d = 0``, so the eye itself gets the ray's peak ``1/(h√2π)``).
+
+    Parameters
+    ----------
+    rays : the frame's gaze rays
+    points : (M, 3) or (3,) points, metres
+
+    Returns
+    -------
+    (M,) field values (a float for a single point)
+    """
+    r = _rays(rays)
+    x = as_float_array(points, "points")
+    single = x.shape == (3,)
+    x2 = as_float_array(x.reshape(1, 3) if single else x, "points", (None, 3))
+    out = _core.saliency_field(r.p, r.v, r.h, x2)
+    return out[0] if single else out  # type: ignore[no-any-return]
+
+
+def saliency_grid(
+    rays: GazeRays,
+    lo: npt.ArrayLike,
+    hi: npt.ArrayLike,
+    shape: int | Sequence[int] = 64,
+) -> FloatArray:
+    """The field sampled on a regular grid, in parallel.
+
+    Axis ``a`` has ``shape[a]`` samples ``numpy.linspace(lo[a], hi[a], shape[a])``; the
+    result ``g[i, j, k]`` is the field at ``(x_i, y_j, z_k)``.
+
+    Parameters
+    ----------
+    rays : the frame's gaze rays
+    lo, hi : (3,) corners of the box, metres
+    shape : int or (3,) samples per axis
+
+    Returns
+    -------
+    (nx, ny, nz) array
+    """
+    r = _rays(rays)
+    lo_a = as_float_array(lo, "lo", (3,))
+    hi_a = as_float_array(hi, "hi", (3,))
+    sh = (int(shape),) * 3 if np.isscalar(shape) else tuple(int(s) for s in shape)  # type: ignore[arg-type]
+    if len(sh) != 3 or min(sh) < 1:
+        raise ValueError(f"shape: expected 3 positive sizes, got {shape!r}")
+    return _core.saliency_grid(  # type: ignore[no-any-return]
+        r.p, r.v, r.h, tuple(lo_a.tolist()), tuple(hi_a.tolist()), sh
+    )
+
+
+def grid_axes(
+    lo: npt.ArrayLike, hi: npt.ArrayLike, shape: int | Sequence[int]
+) -> tuple[FloatArray, FloatArray, FloatArray]:
+    """The sample coordinates of :func:`saliency_grid` along x, y and z."""
+    lo_a = as_float_array(lo, "lo", (3,))
+    hi_a = as_float_array(hi, "hi", (3,))
+    sh = (int(shape),) * 3 if np.isscalar(shape) else tuple(int(s) for s in shape)  # type: ignore[arg-type]
+    xs, ys, zs = (np.linspace(lo_a[a], hi_a[a], sh[a]) for a in range(3))
+    return xs, ys, zs
+
+
+@dataclass(frozen=True)
+class Charge:
+    """One social charge of one frame.
+
+    Attributes
+    ----------
+    position : (3,) the mode of the saliency field, metres
+    magnitude : the field value there (Eq 6.4), the charge's strength
+    members : (K,) person ids of the member rays (rays within ``member_sigma`` bandwidths)
+    member_index : (K,) the same members as row indices into the frame's rays
+    ids : (N,) person ids of all the frame's rays
+    membership : (N,) membership feature (Eq 6.8): ``fᵢ(x)/‖f(x)‖`` over the frame's rays
+    support : how many mean-shift seeds converged here
+    region_centre, region_axes, region_radii : the confidence region (where the field
+        exceeds ``region_level`` (0.8) of ``magnitude``) as an ellipsoid: centre (3,),
+        unit axes as the columns of (3, 3), semi-axes (3,) in metres
+    frame : index of the frame in the sequence
+    """
+
+    position: FloatArray
+    magnitude: float
+    members: IntArray
+    member_index: IntArray
+    ids: IntArray
+    membership: FloatArray
+    support: int
+    region_centre: FloatArray
+    region_axes: FloatArray
+    region_radii: FloatArray
+    frame: int = 0
+
+    def in_region(self, x: npt.ArrayLike) -> bool | npt.NDArray[np.bool_]:
+        """Whether points ``x`` ((3,) or (M, 3)) lie inside the confidence ellipsoid."""
+        pts = np.asarray(x, dtype=np.float64)
+        d = (pts - self.region_centre) @ self.region_axes / self.region_radii
+        inside = (d**2).sum(axis=-1) <= 1.0
+        return bool(inside) if inside.ndim == 0 else inside
+
+    def to_dict(self) -> dict[str, Any]:
+        out: dict[str, Any] = {}
+        for k in self.__dataclass_fields__:
+            val = getattr(self, k)
+            out[k] = val.tolist() if isinstance(val, np.ndarray) else val
+        return out
+
+
+def _mode_kwargs(
+    seeds_per_ray: int,
+    depth_range: tuple[float, float],
+    tol: float,
+    newton: bool,
+    max_iter: int,
+    merge_radius: float,
+    member_sigma: float,
+    min_members: int,
+    exclusive: bool,
+    min_magnitude: float,
+    bounds: tuple[npt.ArrayLike, npt.ArrayLike] | None,
+    region_level: float,
+    region_max_radius: float,
+) -> dict[str, Any]:
+    if len(depth_range) != 2:
+        raise ValueError(f"depth_range: expected (min, max), got {depth_range!r}")
+    for name, val in (
+        ("seeds_per_ray", seeds_per_ray),
+        ("max_iter", max_iter),
+        ("min_members", min_members),
+    ):
+        if isinstance(val, bool) or not isinstance(val, (int, np.integer)) or val < 1:
+            raise ValueError(f"{name}: expected a positive integer, got {val!r}")
+    bnd = None
+    if bounds is not None:
+        blo = as_float_array(bounds[0], "bounds[0]", (3,))
+        bhi = as_float_array(bounds[1], "bounds[1]", (3,))
+        bnd = (tuple(blo.tolist()), tuple(bhi.tolist()))
+    return dict(
+        seeds_per_ray=int(seeds_per_ray),
+        depth_min=float(depth_range[0]),
+        depth_max=float(depth_range[1]),
+        tol=float(tol),
+        newton=bool(newton),
+        max_iter=int(max_iter),
+        merge_radius=float(merge_radius),
+        member_sigma=float(member_sigma),
+        min_members=int(min_members),
+        exclusive=bool(exclusive),
+        min_magnitude=float(min_magnitude),
+        bounds=bnd,
+        region_level=float(region_level),
+        region_max_radius=float(region_max_radius),
+    )
+
+
+def _run(frames: Sequence[GazeRays], seed: int, kw: dict[str, Any]) -> list[list[Charge]]:
+    if len(frames) == 0:
+        return []
+    p = np.concatenate([f.p for f in frames])
+    v = np.concatenate([f.v for f in frames])
+    h = np.concatenate([f.h for f in frames])
+    counts = np.array([len(f) for f in frames], dtype=np.int64)
+    offsets = np.concatenate([[0], np.cumsum(counts)]).astype(np.int64)
+    (frame, pos, mag, sup, mem, mem_off, membership, centre, axes, radii) = _core.find_charges(
+        p, v, h, offsets, check_seed(seed), **kw
+    )
+    # Ragged pieces, split with one numpy call each.
+    mem_split = np.split(mem, mem_off[1:-1]) if len(frame) else []
+    n_per = counts[frame]
+    ms_split = np.split(membership, np.cumsum(n_per)[:-1]) if len(frame) else []
+    out: list[list[Charge]] = [[] for _ in frames]
+    for k in range(len(frame)):
+        f = int(frame[k])
+        ids = frames[f].ids
+        out[f].append(
+            Charge(
+                position=readonly(pos[k]),
+                magnitude=float(mag[k]),
+                members=readonly(ids[mem_split[k]]),
+                member_index=readonly(mem_split[k]),
+                ids=ids,
+                membership=readonly(ms_split[k]),
+                support=int(sup[k]),
+                region_centre=readonly(centre[k]),
+                region_axes=readonly(axes[k]),
+                region_radii=readonly(radii[k]),
+                frame=f,
+            )
+        )
+    return out
+
+
+def find_charges(
+    rays: GazeRays,
+    seed: int = 0,
+    *,
+    seeds_per_ray: int = 20,
+    depth_range: tuple[float, float] = (0.3, 10.0),
+    tol: float = 1e-5,
+    newton: bool = True,
+    max_iter: int = 100,
+    merge_radius: float = 0.2,
+    member_sigma: float = 2.5,
+    min_members: int = 2,
+    exclusive: bool = True,
+    min_magnitude: float = 0.0,
+    bounds: tuple[npt.ArrayLike, npt.ArrayLike] | None = None,
+    region_level: float = 0.8,
+    region_max_radius: float = 10.0,
+) -> list[Charge]:
+    """The social charges of one frame (Sec 6.1.2).
+
+    Seeds are drawn along every ray (``seeds_per_ray`` stratified depths in
+    ``depth_range`` metres, from ``seed``), each climbs the field with the update of
+    Eq 6.7 until it moves less than ``tol`` metres (seeds still drifting after
+    ``max_iter`` iterations are dropped; with ``newton`` (default) a Newton step on the
+    closed-form Hessian replaces the update wherever the Hessian is negative definite and
+    the step raises the field, which makes elongated modes converge fast), modes closer than ``merge_radius`` are merged in
+    seed order, and a mode is kept if at least ``min_members`` rays pass within
+    ``member_sigma`` bandwidths of it (Sec 6.2: "more than one gaze ray must contribute").
+    With ``exclusive`` (default) a ray counts for the strongest charge only
+    (winner-take-all), which rejects crossings of rays from different groups behind their
+    targets; ``exclusive=False`` is the thesis' plain rule. ``bounds=(lo, hi)`` rejects
+    modes outside a box (a room); ``min_magnitude`` weak modes.
+
+    Returns
+    -------
+    list of :class:`Charge`, strongest first. A single ray, or rays that never meet, give
+    an empty list. Same ``seed``, same answer, whatever the number of threads.
+    """
+    r = _rays(rays)
+    kw = _mode_kwargs(
+        seeds_per_ray, depth_range, tol, newton, max_iter, merge_radius, member_sigma, min_members,
+        exclusive, min_magnitude, bounds, region_level, region_max_radius,
+    )  # fmt: skip
+    return _run([r], seed, kw)[0]
+
+
+def find_charges_sequence(
+    frames: Sequence[GazeRays],
+    seed: int = 0,
+    *,
+    seeds_per_ray: int = 20,
+    depth_range: tuple[float, float] = (0.3, 10.0),
+    tol: float = 1e-5,
+    newton: bool = True,
+    max_iter: int = 100,
+    merge_radius: float = 0.2,
+    member_sigma: float = 2.5,
+    min_members: int = 2,
+    exclusive: bool = True,
+    min_magnitude: float = 0.0,
+    bounds: tuple[npt.ArrayLike, npt.ArrayLike] | None = None,
+    region_level: float = 0.8,
+    region_max_radius: float = 10.0,
+) -> list[list[Charge]]:
+    """:func:`find_charges` on every frame in one parallel core call.
+
+    Frame ``t`` of the result equals ``find_charges(frames[t], seed, ...)``; each
+    :class:`Charge` has ``frame = t``.
+    """
+    fr = [_rays(f) for f in frames]
+    kw = _mode_kwargs(
+        seeds_per_ray, depth_range, tol, newton, max_iter, merge_radius, member_sigma, min_members,
+        exclusive, min_magnitude, bounds, region_level, region_max_radius,
+    )  # fmt: skip
+    return _run(fr, seed, kw)
+
+
+@dataclass(frozen=True)
+class ChargeTrack:
+    """One social charge followed through time.
+
+    Attributes
+    ----------
+    id : track id (0, 1, ... in order of first appearance)
+    frames : (K,) frame indices, increasing (gaps where the group had dissolved)
+    positions : (K, 3) charge positions, metres
+    magnitudes : (K,) field values
+    members : per frame, the person ids of the members
+    people : (J,) the person ids indexing ``feature``
+    feature : (J,) centre of the track's membership-feature cluster
+    core_members : person ids that are members in at least half of the track's frames
+    """
+
+    id: int
+    frames: IntArray
+    positions: FloatArray
+    magnitudes: FloatArray
+    members: tuple[IntArray, ...]
+    people: IntArray
+    feature: FloatArray
+    core_members: IntArray
+
+    def __len__(self) -> int:
+        return int(self.frames.shape[0])
+
+    def to_dict(self) -> dict[str, Any]:
+        return {
+            "id": self.id,
+            "frames": self.frames.tolist(),
+            "positions": self.positions.tolist(),
+            "magnitudes": self.magnitudes.tolist(),
+            "members": [m.tolist() for m in self.members],
+            "people": self.people.tolist(),
+            "feature": self.feature.tolist(),
+            "core_members": self.core_members.tolist(),
+        }
+
+
+def track_charges(
+    charges_per_frame: Sequence[Sequence[Charge]],
+    *,
+    bandwidth: float = 0.3,
+    max_iter: int = 300,
+    bin_seeding: bool = True,
+) -> list[ChargeTrack]:
+    """Links charges over frames by their membership features (Sec 6.1.3).
+
+    Every charge's membership (Eq 6.8) is laid out over all person ids of the sequence
+    (zero for people absent from its frame) and the features are clustered by classic
+    mean-shift (flat kernel of radius ``bandwidth``) in the core. A cluster is a track:
+    the same group keeps its id while its charge moves, and gets it back when it dissolves
+    and re-forms. A track holds at most one charge per frame (the one closest to the
+    cluster centre); other charges of that cluster in that frame are left out.
+
+    Parameters
+    ----------
+    charges_per_frame : ``find_charges_sequence`` output; entry ``t`` is frame ``t``
+    bandwidth : flat-kernel radius in feature space (unit vectors: two disjoint groups are
+        √2 apart)
+
+    Returns
+    -------
+    list of :class:`ChargeTrack` sorted by id
+    """
+    flat = [(t, c) for t, cs in enumerate(charges_per_frame) for c in cs]
+    if not flat:
+        return []
+    people = np.unique(np.concatenate([c.ids for _, c in flat]))
+    feats = np.zeros((len(flat), len(people)))
+    for k, (_, c) in enumerate(flat):
+        feats[k, np.searchsorted(people, c.ids)] = c.membership
+    frames = np.array([t for t, _ in flat], dtype=np.int64)
+    track, centres = _core.track_charges(
+        feats,
+        frames,
+        bandwidth=float(bandwidth),
+        max_iter=int(max_iter),
+        bin_seeding=bool(bin_seeding),
+    )
+    out: list[ChargeTrack] = []
+    for tid in range(centres.shape[0]):
+        ks = np.flatnonzero(track == tid)
+        ks = ks[np.argsort(frames[ks], kind="stable")]
+        members = tuple(readonly(flat[k][1].members.copy()) for k in ks)
+        allm = np.concatenate(members) if members else np.zeros(0, np.int64)
+        uniq, cnt = np.unique(allm, return_counts=True)
+        out.append(
+            ChargeTrack(
+                id=tid,
+                frames=readonly(frames[ks].copy()),
+                positions=readonly(np.array([flat[k][1].position for k in ks]).reshape(-1, 3)),
+                magnitudes=readonly(np.array([flat[k][1].magnitude for k in ks])),
+                members=members,
+                people=readonly(people.astype(np.int64)),
+                feature=readonly(centres[tid].copy()),
+                core_members=readonly(uniq[cnt * 2 >= len(ks)].astype(np.int64)),
+            )
+        )
+    return out
+
+
+def plot_saliency(
+    rays: GazeRays,
+    lo: npt.ArrayLike,
+    hi: npt.ArrayLike,
+    *,
+    shape: int | Sequence[int] = 96,
+    axis: int = 2,
+    charges: Sequence[Charge] = (),
+    truth: npt.ArrayLike | None = None,
+    ax: Axes | None = None,
+) -> Figure:
+    """Maximum-intensity projection of the saliency field along ``axis`` (Fig 6.2c), with
+    the rays, the charges (with their confidence ellipses projected) and optional true
+    targets ``truth (T, 3)``. Returns the figure."""
+    import matplotlib.pyplot as plt
+    from matplotlib.patches import Polygon
+
+    if axis not in (0, 1, 2):
+        raise ValueError(f"axis: expected 0, 1 or 2, got {axis!r}")
+    r = _rays(rays)
+    g = saliency_grid(r, lo, hi, shape)
+    mip = g.max(axis=axis)
+    keep = [a for a in range(3) if a != axis]
+    axes_xyz = grid_axes(lo, hi, shape)
+    if ax is None:
+        fig, ax = plt.subplots(figsize=(6, 5))
+    else:
+        fig = ax.figure  # type: ignore[assignment]
+    u, w = axes_xyz[keep[0]], axes_xyz[keep[1]]
+    im = ax.imshow(
+        mip.T, origin="lower", extent=(u[0], u[-1], w[0], w[-1]), cmap="magma", aspect="equal"
+    )
+    fig.colorbar(im, ax=ax, label="social saliency (MIP)")
+    span = float(np.linalg.norm(np.asarray(hi, float) - np.asarray(lo, float)))
+    for i in range(len(r)):
+        a = r.p[i][keep]
+        b = (r.p[i] + r.v[i] * span)[keep]
+        ax.plot([a[0], b[0]], [a[1], b[1]], color="cyan", lw=0.6, alpha=0.6)
+        ax.plot(*a, "o", color="cyan", ms=3)
+    theta = np.linspace(0, 2 * np.pi, 60)
+    for c in charges:
+        ax.plot(*c.position[keep], "x", color="lime", ms=8, mew=2)
+        # Outline of the ellipsoid's projection: project a dense set of surface points.
+        s = np.stack(
+            [np.outer(np.cos(theta), np.sin(theta)), np.outer(np.sin(theta), np.sin(theta)),
+             np.outer(np.ones_like(theta), np.cos(theta))], axis=-1,
+        ).reshape(-1, 3)  # fmt: skip
+        pts = c.region_centre + (s * c.region_radii) @ c.region_axes.T
+        hull = _convex_hull(pts[:, keep])
+        ax.add_patch(Polygon(hull, fill=False, ec="lime", lw=1))
+    if truth is not None:
+        t = as_float_array(truth, "truth", (None, 3))
+        ax.plot(t[:, keep[0]], t[:, keep[1]], "+", color="white", ms=10, mew=1.5)
+    names = "xyz"
+    ax.set_xlabel(f"{names[keep[0]]} (m)")
+    ax.set_ylabel(f"{names[keep[1]]} (m)")
+    ax.set_xlim(u[0], u[-1])
+    ax.set_ylim(w[0], w[-1])
+    ax.set_title(f"social saliency field, {len(r)} rays, {len(charges)} charges")
+    return fig  # type: ignore[return-value]
+
+
+def _cross2(a: FloatArray, b: FloatArray) -> float:
+    return float(a[0] * b[1] - a[1] * b[0])
+
+
+def _convex_hull(pts: FloatArray) -> FloatArray:
+    """Monotone-chain convex hull of 2D points (for drawing projected ellipsoids)."""
+    p = pts[np.lexsort((pts[:, 1], pts[:, 0]))]
+
+    def half(seq: FloatArray) -> list[FloatArray]:
+        h: list[FloatArray] = []
+        for q in seq:
+            while len(h) >= 2 and _cross2(h[-1] - h[-2], q - h[-2]) <= 0:
+                h.pop()
+            h.append(q)
+        return h
+
+    lower, upper = half(p), half(p[::-1])
+    return np.array(lower[:-1] + upper[:-1])
+
+
+def plot_charge_tracks(
+    tracks: Sequence[ChargeTrack],
+    *,
+    times: npt.ArrayLike | None = None,
+    truth: npt.ArrayLike | None = None,
+) -> Figure:
+    """Charge tracks over time (Fig 6.3b, 6.4a): x, y, z of every track against frame (or
+    ``times``), one colour per track id, gaps where a group had dissolved; plus a top view.
+    ``truth (F, T, 3)`` or ``(T, 3)`` draws true target positions dotted."""
+    import matplotlib.pyplot as plt
+
+    fig, axs = plt.subplots(1, 4, figsize=(16, 3.8))
+    cmap = plt.get_cmap("tab10")
+    tt = None if times is None else np.asarray(times, dtype=np.float64)
+    for tr in tracks:
+        col = cmap(tr.id % 10)
+        x = tr.frames.astype(np.float64) if tt is None else tt[tr.frames]
+        # Break the line at gaps so dissolution shows.
+        gaps = np.flatnonzero(np.diff(tr.frames) > 1) + 1
+        for a in range(3):
+            for seg_x, seg_y in zip(
+                np.split(x, gaps), np.split(tr.positions[:, a], gaps), strict=True
+            ):
+                axs[a].plot(
+                    seg_x, seg_y, color=col, lw=1.5, label=f"track {tr.id}" if a == 0 else None
+                )
+        axs[3].plot(tr.positions[:, 0], tr.positions[:, 1], ".", color=col, ms=2)
+    if truth is not None:
+        T = np.asarray(truth, dtype=np.float64)
+        if T.ndim == 2:
+            for a in range(3):
+                for t in T:
+                    axs[a].axhline(t[a], color="k", ls=":", lw=1)
+            axs[3].plot(T[:, 0], T[:, 1], "k+", ms=10)
+        else:
+            x = np.arange(T.shape[0], dtype=np.float64) if tt is None else tt
+            for a in range(3):
+                axs[a].plot(x, T[:, :, a], "k:", lw=1)
+            axs[3].plot(T[..., 0].ravel(), T[..., 1].ravel(), "k,", alpha=0.3)
+    for a, name in enumerate("xyz"):
+        axs[a].set_xlabel("frame" if tt is None else "time (s)")
+        axs[a].set_ylabel(f"{name} (m)")
+    axs[3].set_xlabel("x (m)")
+    axs[3].set_ylabel("y (m)")
+    axs[3].set_aspect("equal", adjustable="datalim")
+    axs[3].set_title("top view")
+    if tracks:
+        axs[0].legend(fontsize=7, loc="best")
+    fig.suptitle(f"{len(tracks)} social charge tracks")
+    fig.tight_layout()
+    return fig
