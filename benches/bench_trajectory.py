@@ -16,8 +16,9 @@ import argparse
 import time
 
 import numpy as np
-import socialcam as sc
 from scipy.optimize import least_squares
+
+import socialcam as sc
 from socialcam import synth
 
 

@@ -15,6 +15,7 @@ import time
 from pathlib import Path
 
 import numpy as np
+
 import socialcam as sc
 from socialcam import synth
 from socialcam.mocap import load_bvh, load_c3d
