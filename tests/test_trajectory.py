@@ -8,6 +8,7 @@ import json
 
 import numpy as np
 import pytest
+
 import socialcam as sc
 from socialcam import synth
 from socialcam.camera import Cameras
