@@ -201,7 +201,7 @@ fn shift_terms(rays: &GazeRays, x: &Vector3<f64>) -> ShiftTerms {
         den: 0.0,
     };
     for i in 0..rays.len() {
-        let (p, v, h) = (&rays.p[i], &rays.v[i], rays.h[i]);
+        let (p, v) = (&rays.p[i], &rays.v[i]);
         let w = x - p;
         let s = w.dot(v);
         if s < 0.0 {
@@ -211,21 +211,25 @@ fn shift_terms(rays: &GazeRays, x: &Vector3<f64>) -> ShiftTerms {
         let pp = perp.norm_squared();
         if s < MIN_DEPTH {
             if pp == 0.0 {
-                t.field_sum += INV_SQRT_2PI / h;
+                t.field_sum += rays.peak[i];
             }
             continue;
         }
-        let q = pp / (s * s * h * h);
-        if q > Q_CUTOFF {
+        // q = ‖d/h‖² = pp/(s²h²); the cutoff test needs no division.
+        let pp_h = pp * rays.inv_h2[i];
+        let s2 = s * s;
+        if pp_h > Q_CUTOFF * s2 {
             continue;
         }
-        let e = (-0.5 * q).exp();
-        t.field_sum += e * INV_SQRT_2PI / h;
-        let wi = e / (h * h * h * s * s);
-        let x_tilde = x - perp + v * (pp / s);
-        t.num += x_tilde * wi;
+        let inv_s2 = 1.0 / s2;
+        let e = (-0.5 * pp_h * inv_s2).exp();
+        t.field_sum += e * rays.peak[i];
+        let wi = e * rays.inv_h3[i] * inv_s2;
+        // x̃ − x = −(x − x̂) + (‖x − x̂‖²/s) v; Σ wᵢ x̃ᵢ is formed as x Σ wᵢ + Σ wᵢ (x̃ᵢ − x).
+        t.num += (v * (pp * s * inv_s2) - perp) * wi;
         t.den += wi;
     }
+    t.num += x * t.den;
     t
 }
 
@@ -305,14 +309,17 @@ fn full_terms(rays: &GazeRays, x: &Vector3<f64>) -> FullTerms {
     t
 }
 
-/// Climbs from `x0` with the mean-shift update of Eq 6.7, accelerated near a mode.
+/// Climbs from `x0` with the mean-shift update of Eq 6.7.
 ///
-/// Eq 6.7 converges only linearly, and very slowly along the long axis of the elongated
-/// modes that nearly parallel rays make. So each iteration first tries the Newton step
-/// `−(∇²f)⁻¹∇f` where the Hessian is negative definite (inside the mode's basin), and
-/// takes it if it raises the field; otherwise it takes the Eq 6.7 step, halved until it
-/// does not lower the field (the ray kernel is not a classic mean-shift kernel, so ascent
-/// is not guaranteed by theory). If no halving helps, `x` is a numerical maximum.
+/// Eq 6.7 converges only linearly: very slowly along the long axis of the elongated
+/// modes that nearly parallel rays make, and along a ray's own ridge near the eye, where
+/// its weight `1/s²` dominates. With `opts.newton` each iteration first tries the Newton
+/// step `−(∇²f)⁻¹∇f` where the Hessian is negative definite (inside a mode's basin) and
+/// takes it if it raises the field; otherwise it tries an over-relaxed Eq 6.7 step
+/// (factor doubling after each success). The fallback is always the Eq 6.7 step, halved
+/// until it does not lower the field (the ray kernel is not a classic mean-shift kernel,
+/// so ascent is not guaranteed by theory). If no halving helps, `x` is a numerical
+/// maximum. Without `opts.newton` this is the plain Eq 6.7 iteration with that safeguard.
 fn climb(rays: &GazeRays, x0: Vector3<f64>, opts: &ModeOptions) -> Climb {
     let n = rays.len() as f64;
     let eval = |x: &Vector3<f64>| {
