@@ -11,6 +11,7 @@ import argparse
 import time
 
 import numpy as np
+
 import socialcam as sc
 from socialcam import synth
 

@@ -2,9 +2,10 @@ from __future__ import annotations
 
 import numpy as np
 import pytest
-import socialcam as sc
 from hypothesis import given, settings
 from hypothesis import strategies as st
+
+import socialcam as sc
 from socialcam import synth
 
 

@@ -4,7 +4,9 @@ import json
 import subprocess
 import sys
 
+import numpy as np
 import pytest
+
 from socialcam.cli import main
 
 
@@ -16,14 +18,23 @@ def test_demo_writes_report_and_recovers_the_scene(tmp_path, capsys):
     assert tri["error_mm_median"] < 15.0
     assert tri["rms_px_refined_mean"] <= tri["rms_px_linear_mean"]
     assert abs(tri["similarity_to_truth"]["scale"] - 1) < 1e-2
+    st = report["stages"]
+    assert st["trajectory"]["error_mm_median"] < 15.0  # 1 px noise, real walking
+    assert st["trajectory"]["relative_error_mean"] < 0.05
+    assert st["social_charges"]["correct_count_fraction"] > 0.9
+    assert st["social_charges"]["charge_error_cm_median"] < 20
+    gf = st["gaze_field"]
+    assert gf["leave_one_out_deg_median"] < gf["rbf_deg_median"]
+    assert np.isfinite(st["articulated"]["error_mm_median"])
     assert "report written" in capsys.readouterr().out
 
 
 def test_demo_plots(tmp_path):
     main(["demo", "--out", str(tmp_path)])
-    png = tmp_path / "triangulation.png"
-    assert png.stat().st_size > 10_000
-    assert png.read_bytes()[:8] == b"\x89PNG\r\n\x1a\n"
+    for name in ("triangulation", "trajectory", "saliency", "charge_tracks", "gaze_field"):
+        png = tmp_path / f"{name}.png"
+        assert png.stat().st_size > 10_000
+        assert png.read_bytes()[:8] == b"\x89PNG\r\n\x1a\n"
 
 
 def test_console_script_and_bad_arguments():

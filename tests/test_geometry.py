@@ -2,10 +2,11 @@ from __future__ import annotations
 
 import numpy as np
 import pytest
-import socialcam as sc
 from hypothesis import given, settings
 from hypothesis import strategies as st
 from scipy.spatial.transform import Rotation
+
+import socialcam as sc
 from socialcam import synth
 
 seeds = st.integers(0, 2**31 - 1)

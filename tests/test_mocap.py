@@ -2,6 +2,7 @@ from __future__ import annotations
 
 import numpy as np
 import pytest
+
 from socialcam.mocap import CMU_BVH_METRES_PER_UNIT, load_bvh, load_c3d
 
 

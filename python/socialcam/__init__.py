@@ -7,8 +7,19 @@ Conventions (see DESIGN.md): metres, seconds, radians; float64 arrays; pinhole
 ``P = K R [I | -C]`` with OpenCV pixel coordinates; NaN rows for missing observations.
 """
 
-from socialcam import synth
+from socialcam import mocap, sfm, synth
 from socialcam._core import __version__
+from socialcam.articulated import (
+    ArticulatedTrajectory,
+    BqpResult,
+    Skeleton,
+    SkeletonReconstruction,
+    articulated_bqp,
+    articulated_reconstructability,
+    reconstruct_articulated,
+    reconstruct_skeleton,
+    solve_bqp,
+)
 from socialcam.camera import Cameras
 from socialcam.charges import (
     Charge,
@@ -23,6 +34,15 @@ from socialcam.charges import (
     track_charges,
 )
 from socialcam.errors import ConvergenceError, DegenerateError
+from socialcam.gazefield import (
+    Anomalies,
+    GazeCrossValidation,
+    GazeField,
+    cross_validate_gaze,
+    detect_anomalies,
+    fuse_gaze,
+    plot_gaze_field,
+)
 from socialcam.geometry import (
     TriangulationInfo,
     align_similarity,
@@ -31,27 +51,56 @@ from socialcam.geometry import (
     ray_sphere,
     triangulate,
 )
+from socialcam.trajectory import (
+    Trajectory,
+    TrajectoryBatch,
+    reconstruct_trajectories,
+    reconstruct_trajectory,
+    reconstructability,
+)
 
 __all__ = [
+    "Anomalies",
+    "ArticulatedTrajectory",
+    "BqpResult",
     "Cameras",
-    # social charges (issue 5)
     "Charge",
     "ChargeTrack",
     "ConvergenceError",
     "DegenerateError",
+    "GazeCrossValidation",
+    "GazeField",
     "GazeRays",
+    "Skeleton",
+    "SkeletonReconstruction",
+    "Trajectory",
+    "TrajectoryBatch",
     "TriangulationInfo",
     "__version__",
     "align_similarity",
+    "articulated_bqp",
+    "articulated_reconstructability",
+    "cross_validate_gaze",
     "dct_basis",
+    "detect_anomalies",
     "find_charges",
     "find_charges_sequence",
+    "fuse_gaze",
+    "mocap",
     "perspective_distance",
     "plot_charge_tracks",
+    "plot_gaze_field",
     "plot_saliency",
     "ray_sphere",
+    "reconstruct_articulated",
+    "reconstruct_skeleton",
+    "reconstruct_trajectories",
+    "reconstruct_trajectory",
+    "reconstructability",
     "saliency_field",
     "saliency_grid",
+    "sfm",
+    "solve_bqp",
     "synth",
     "track_charges",
     "triangulate",

@@ -5,7 +5,7 @@ Array conventions: float64, row-major; cameras as ``K (F,3,3)``, ``R (F,3,3)``
 world→camera, ``C (F,3)`` centres in metres; NaN pixel rows mean "not observed".
 """
 
-from typing import TypeAlias
+from typing import Any, TypeAlias
 
 import numpy as np
 import numpy.typing as npt
@@ -58,6 +58,36 @@ def ray_sphere(origins: _F64, directions: _F64, centres: _F64, radii: _F64) -> t
 def perspective_distance(p: _F64, v: _F64, x: _F64) -> _F64:
     """Eq 6.2 vectors ``(N,3)``; ``inf`` rows behind the eye."""
 
+# --- trajectory reconstruction (thesis Chapter 5) ---------------------------------------
+def reconstruct_trajectories(
+    k_intr: _F64,
+    r: _F64,
+    c: _F64,
+    times: _F64,
+    x: _F64,
+    k: int | None = None,
+    folds: int = 5,
+    k_min: int = 1,
+    k_max: int | None = None,
+    cv_rule: str = "min",
+    refine: bool = True,
+    max_iterations: int = 100,
+    keep_covariance: bool = False,
+    strict: bool = False,
+) -> dict[str, Any]:
+    """Trajectories of ``x (N,F,2)`` from cameras with capture ``times (F,)``; ``k=None``
+    chooses K per point by cross validation (Eq 5.8). A dict of arrays: ``points (N,F,3)``,
+    ``std (N,F,3)``, ``coeffs (N,Kmax,3)``, ``cv_error (N,Kcv)``, ``k``, ``rms``,
+    ``rms_linear``, ``converged``, ``iterations``, ``rank``, ``cond``, ``sigma``,
+    ``observed`` ``(N,)``, ``covariance`` (list of ``(3k,3k)`` or ``None``), ``failures``
+    (list of ``str | None``) and ``span (t0, t1, n_norm)``. ``strict=True`` raises the first
+    failure."""
+
+def reconstructability(points: _F64, centres: _F64, k: int, times: _F64 | None = None) -> float:
+    """η of Eq 5.16 for a true trajectory ``(F,3)`` and camera centres ``(F,3)``."""
+
+def null_residual(trajectory: _F64, k: int, times: _F64 | None = None) -> float:
+    """``‖Θ^⊥ β^⊥‖`` of a trajectory ``(F,3)`` with ``k`` DCT functions."""
 # --- social saliency and social charges (issue 5, thesis Chapter 6) ---
 
 def saliency_field(p: _F64, v: _F64, h: _F64, points: _F64) -> _F64:
@@ -120,3 +150,146 @@ def track_charges(
 ) -> tuple[npt.NDArray[np.int64], _F64]:
     """Mean-shift tracking of membership features ``(n,J)`` → track ids ``(n,)`` (−1 =
     dropped duplicate) and centres ``(K,J)`` (Sec 6.1.3)."""
+# ---- issue 6: gaze field (thesis Chapter 7). Rays flat: p (N,3), v (N,3), members (N,)
+# dense int64 in 0..J, offsets (F+1,) int64; windows (W,3) int64 [start, end, n_charges];
+# a field as positions (F,I,3) NaN-padded, magnitudes (F,I), kappa (F,) (NaN = no field).
+
+def gaze_split_windows(counts: npt.NDArray[np.int64], min_len: int) -> npt.NDArray[np.int64]:
+    """Windows ``(W,3)`` of constant charge count (Sec 7.3.1); runs shorter than
+    ``min_len`` frames are absorbed into a neighbour."""
+
+def gaze_init(
+    p: _F64,
+    v: _F64,
+    offsets: npt.NDArray[np.int64],
+    windows: npt.NDArray[np.int64],
+    sigma: float,
+    candidates: _F64 | None = None,
+) -> _F64:
+    """Initial charge tracks ``(F,I,3)`` (NaN-padded) from ``candidates (F,C,3)`` or from
+    pairwise ray intersections scored with bandwidth ``sigma``."""
+
+def gaze_em(
+    p: _F64,
+    v: _F64,
+    members: npt.NDArray[np.int64],
+    offsets: npt.NDArray[np.int64],
+    windows: npt.NDArray[np.int64],
+    init: _F64,
+    kappa: float | None = None,
+    kappa_init: float = 10.0,
+    max_iterations: int = 200,
+    tolerance: float = 1e-7,
+    max_angle: float = 0.5235987755982988,
+    inner_iterations: int = 5,
+    lambda_g: float = 0.0,
+    filter: str = "velocity",
+    membership: str = "window",
+) -> tuple[
+    _F64,
+    _F64,
+    _F64,
+    _F64,
+    _F64,
+    _F64,
+    npt.NDArray[np.int64],
+    npt.NDArray[np.bool_],
+]:
+    """Time-windowed EM (Eq 7.10–7.14): positions ``(F,I,3)``, magnitudes ``(F,I)``, κ
+    ``(W,)``, memberships ``(W,J,I)``, responsibilities ``(N,I)``, log-likelihood ``(W,)``,
+    iterations ``(W,)``, converged ``(W,)``."""
+
+def gaze_predict(
+    positions: _F64,
+    magnitudes: _F64,
+    kappa: _F64,
+    frame: npt.NDArray[np.int64],
+    points: _F64,
+) -> _F64:
+    """Most likely directions ``(M,3)`` (Eq 7.3); NaN rows where undefined."""
+
+def gaze_log_density(
+    positions: _F64,
+    magnitudes: _F64,
+    kappa: _F64,
+    frame: npt.NDArray[np.int64],
+    p: _F64,
+    v: _F64,
+) -> _F64:
+    """``ln p(v | p)`` ``(M,)`` (Eq 7.7); NaN where the frame has no field."""
+
+def gaze_angle_to_charges(
+    positions: _F64,
+    magnitudes: _F64,
+    kappa: _F64,
+    frame: npt.NDArray[np.int64],
+    p: _F64,
+    v: _F64,
+    self_radius: float,
+) -> _F64:
+    """Radians from ``v`` to the closest charge direction ``(M,)``; NaN where none."""
+# --- binary quadratic programming and articulated motion (Chapter 4) ---
+
+def solve_bqp(
+    q: _F64, c: _F64 | None = None, time_limit: float | None = None, node_limit: int | None = None
+) -> tuple[npt.NDArray[np.bool_], float, float, float, int, bool]:
+    """Exact ``min bᵀQb + cᵀb`` over ``{0,1}ⁿ``: ``(x (n,), objective, bound, gap, nodes,
+    optimal)``."""
+
+def reconstruct_articulated(
+    k_mat: _F64,
+    r_mat: _F64,
+    c_mat: _F64,
+    x: _F64,
+    parent: _F64,
+    times: _F64,
+    length: float,
+    k: int,
+    refine: bool = True,
+    time_limit: float | None = None,
+    node_limit: int | None = None,
+    fit_radius: bool = False,
+) -> dict[str, Any]:
+    """One articulated trajectory from ``x (F,2)`` (NaN = missing) and ``parent (F,3)``: a
+    dict with ``X (F,3)``, ``radius``, ``coeffs_theta``/``coeffs_phi (K,)``, ``bqp_size``,
+    ``bqp_objective``, ``bqp_gap``, ``bqp_nodes``, ``bqp_optimal``, ``n_observed``,
+    ``reprojection_rms``, ``lm_iterations``, ``converged``."""
+
+def reconstruct_skeleton(
+    k_mat: _F64,
+    r_mat: _F64,
+    c_mat: _F64,
+    x: _F64,
+    parents: list[int],
+    lengths: list[float],
+    root: _F64,
+    times: _F64,
+    k: int,
+    refine: bool = True,
+    time_limit: float | None = None,
+    node_limit: int | None = None,
+    fit_radius: bool = False,
+) -> tuple[_F64, list[dict[str, Any] | None]]:
+    """Whole skeleton from ``x (F,J,2)`` and ``root (F,3)``: ``X (F,J,3)`` and one dict per
+    joint as in :func:`reconstruct_articulated` (``None`` for the root)."""
+
+def skeleton_order(parents: list[int], lengths: list[float]) -> list[int]:
+    """Validates a tree (``-1`` = root) and returns a parents-first joint order."""
+
+def articulated_reconstructability(
+    k_mat: _F64, r_mat: _F64, c_mat: _F64, parent: _F64, child: _F64, times: _F64, k: int
+) -> float:
+    """η_a of Eq 4.13 for a known child trajectory ``(F,3)``."""
+
+def articulated_bqp(
+    k_mat: _F64,
+    r_mat: _F64,
+    c_mat: _F64,
+    x: _F64,
+    parent: _F64,
+    times: _F64,
+    length: float,
+    k: int,
+    fit_radius: bool = False,
+) -> tuple[_F64, _F64, float]:
+    """``(Q (n,n), c (n,), constant)`` of Eq 4.12."""

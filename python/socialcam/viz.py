@@ -87,3 +87,37 @@ def plot_reconstruction(
     ax2.legend()
     fig.tight_layout()
     return fig
+
+
+def plot_trajectories(
+    cameras: Cameras,
+    truth: npt.ArrayLike,
+    estimate: npt.ArrayLike,
+    *,
+    title: str = "",
+) -> Any:
+    """True (grey) and reconstructed (red) trajectories ``(N, F, 3)`` with the camera
+    centres, beside the 3D error over time (median and 90th percentile over points, mm).
+    Returns the figure."""
+    plt = _plt()
+    X = np.asarray(truth, dtype=float)
+    Y = np.asarray(estimate, dtype=float)
+    fig = plt.figure(figsize=(11, 4.5))
+    ax = fig.add_subplot(1, 2, 1, projection="3d")
+    ax.scatter(*cameras.C.T, s=6, c="tab:blue", label="camera centres")
+    for i in range(X.shape[0]):
+        ax.plot(*X[i].T, c="0.6", lw=1, label="ground truth" if i == 0 else None)
+        ax.plot(*Y[i].T, c="tab:red", lw=1, label="reconstructed" if i == 0 else None)
+    set_equal_aspect(ax, np.r_[X.reshape(-1, 3), cameras.C])
+    ax.legend(loc="upper left", fontsize=8)
+    ax.set_title(title)
+    ax2 = fig.add_subplot(1, 2, 2)
+    err = 1e3 * np.linalg.norm(X - Y, axis=2)
+    t = np.arange(X.shape[1]) if cameras.times is None else cameras.times
+    ax2.plot(t, np.nanmedian(err, axis=0), c="tab:red", label="median over points")
+    ax2.plot(t, np.nanpercentile(err, 90, axis=0), c="tab:red", ls=":", label="90th percentile")
+    ax2.set_xlabel("time [s]" if cameras.times is not None else "frame")
+    ax2.set_ylabel("3D error [mm]")
+    ax2.legend()
+    fig.tight_layout()
+    return fig

@@ -7,16 +7,23 @@
 
 use pyo3::prelude::*;
 
+mod bqp;
 mod convert;
 mod errors;
 mod geometry;
 mod saliency;
+mod trajectory;
+// issue 6: gaze field
+mod gazefield;
 
 #[pymodule]
 fn _core(m: &Bound<'_, PyModule>) -> PyResult<()> {
     m.add("__version__", env!("CARGO_PKG_VERSION"))?;
     errors::register(m)?;
     geometry::register(m)?;
+    trajectory::register(m)?;
     saliency::register(m)?;
+    gazefield::register(m)?;
+    bqp::register(m)?;
     Ok(())
 }

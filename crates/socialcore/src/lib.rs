@@ -19,9 +19,14 @@
 //! # Ok::<(), socialcore::Error>(())
 //! ```
 
+pub mod articulated;
 pub mod basis;
+pub mod bqp;
 pub mod error;
 pub mod geometry;
+pub mod trajectory;
+// issue 6: gaze field (thesis Chapter 7)
+pub mod gazefield;
 
 pub use error::{Error, Result};
 pub mod saliency;

@@ -22,7 +22,7 @@ proptest! {
     #![proptest_config(ProptestConfig::with_cases(64))]
 
     #[test]
-    fn noise_free_triangulation_is_exact(x in vec3(), azimuths in prop::collection::vec(0.0..6.28f64, 2..6)) {
+    fn noise_free_triangulation_is_exact(x in vec3(), azimuths in prop::collection::vec(0.0..std::f64::consts::TAU, 2..6)) {
         let k = Matrix3::new(900.0, 0.0, 640.0, 0.0, 900.0, 360.0, 0.0, 0.0, 1.0);
         let mut cams = Vec::new();
         for (i, a) in azimuths.iter().enumerate() {

@@ -10,7 +10,8 @@ Building blocks
 - people: :func:`wander`, :func:`looking_at` → :class:`People` (gaze model of Sec 3.1)
 - a ready scene: :func:`multiview_scene`
 - social scenes with known joint attention: :func:`mocap_replica`, :func:`meeting`,
-  :func:`party` → :class:`SocialScene`
+  :func:`party` → :class:`SocialScene`; :func:`mafia` → :class:`MafiaScene` (with
+  inattentive players)
 """
 
 from __future__ import annotations
@@ -27,6 +28,7 @@ from socialcam.synth.cameras import (
     smooth_path,
     walking_head,
 )
+from socialcam.synth.mafia import MafiaScene, mafia
 from socialcam.synth.observe import Observations, observe
 from socialcam.synth.people import People, looking_at, primary_from_true, wander
 from socialcam.synth.points import random_points, smooth_trajectories
@@ -58,6 +60,7 @@ def multiview_scene(
 
 
 __all__ = [
+    "MafiaScene",
     "MultiviewScene",
     "Observations",
     "People",
@@ -67,6 +70,7 @@ __all__ = [
     "intrinsics",
     "look_at",
     "looking_at",
+    "mafia",
     "meeting",
     "mocap_replica",
     "multiview_scene",

@@ -1,0 +1,377 @@
+//! Binary quadratic programming and articulated reconstruction (thesis Chapter 4).
+//! NumPy formats: `Q (n,n)` symmetric, `c (n,)`; cameras `K (F,3,3)`, `R (F,3,3)`,
+//! `C (F,3)`; child pixels `x (F,2)` or skeleton pixels `x (F,J,2)` with NaN rows = missing;
+//! parent / root trajectories `(F,3)` metres; `times (F,)` seconds; skeleton `parents (J,)`
+//! (−1 for the root) and `lengths (J,)` metres.
+
+use nalgebra::{Vector2, Vector3};
+use numpy::ndarray::{Array1, Array2, Array3};
+use numpy::{
+    IntoPyArray, PyArray1, PyArray2, PyArray3, PyReadonlyArray1, PyReadonlyArray2, PyReadonlyArray3,
+};
+use pyo3::exceptions::PyValueError;
+use pyo3::prelude::*;
+use socialcore::articulated::{self as art, ArticulatedOptions, ArticulatedResult, Skeleton};
+use socialcore::bqp::{solve_bqp as core_solve, BqpOptions, BqpProblem, BqpSolution};
+use socialcore::geometry::Camera;
+use std::time::Duration;
+
+use crate::convert::{cameras, rows, vec1};
+use crate::errors::{detach, map};
+
+fn bqp_options(time_limit: Option<f64>, node_limit: Option<u64>) -> PyResult<BqpOptions> {
+    let time_limit = match time_limit {
+        Some(t) if !(t.is_finite() && t > 0.0) => {
+            return Err(PyValueError::new_err(format!(
+                "time_limit: must be positive and finite, got {t}"
+            )))
+        }
+        Some(t) => Some(Duration::from_secs_f64(t)),
+        None => None,
+    };
+    Ok(BqpOptions {
+        time_limit,
+        node_limit,
+        ..BqpOptions::default()
+    })
+}
+
+type SolutionTuple<'py> = (Bound<'py, PyArray1<bool>>, f64, f64, f64, u64, bool);
+
+fn solution<'py>(py: Python<'py>, s: BqpSolution) -> SolutionTuple<'py> {
+    (
+        Array1::from(s.x).into_pyarray(py),
+        s.objective,
+        s.bound,
+        s.gap,
+        s.nodes,
+        s.optimal,
+    )
+}
+
+/// Exact `min bᵀQb + cᵀb` over `b ∈ {0,1}ⁿ`: `(x, objective, bound, gap, nodes, optimal)`.
+#[pyfunction]
+#[pyo3(signature = (q, c=None, time_limit=None, node_limit=None))]
+fn solve_bqp<'py>(
+    py: Python<'py>,
+    q: PyReadonlyArray2<'py, f64>,
+    c: Option<PyReadonlyArray1<'py, f64>>,
+    time_limit: Option<f64>,
+    node_limit: Option<u64>,
+) -> PyResult<SolutionTuple<'py>> {
+    let qv = q.as_array();
+    let n = qv.nrows();
+    if qv.ncols() != n {
+        return Err(PyValueError::new_err(format!(
+            "Q: expected a square (n, n) float64 array, got shape ({}, {})",
+            n,
+            qv.ncols()
+        )));
+    }
+    let qf: Vec<f64> = qv.iter().copied().collect();
+    let cf = match &c {
+        Some(c) => vec1(c),
+        None => vec![0.0; n],
+    };
+    let opts = bqp_options(time_limit, node_limit)?;
+    let problem = map(BqpProblem::from_row_major(n, qf, cf))?;
+    let s = detach(py, || core_solve(&problem, &opts))?;
+    Ok(solution(py, s))
+}
+
+fn pixels_2d(x: &PyReadonlyArray2<'_, f64>, f: usize) -> PyResult<Vec<Option<Vector2<f64>>>> {
+    let (xf, nx) = rows(x, "x", 2)?;
+    if nx != f {
+        return Err(PyValueError::new_err(format!(
+            "x: expected ({f}, 2) pixels (one row per camera frame), got ({nx}, 2)"
+        )));
+    }
+    (0..f)
+        .map(|i| {
+            let (u, v) = (xf[2 * i], xf[2 * i + 1]);
+            match (u.is_nan(), v.is_nan()) {
+                (true, true) => Ok(None),
+                (false, false) if u.is_finite() && v.is_finite() => Ok(Some(Vector2::new(u, v))),
+                _ => Err(PyValueError::new_err(format!(
+                    "x: frame {i} must be finite or entirely NaN (missing)"
+                ))),
+            }
+        })
+        .collect()
+}
+
+fn points(a: &PyReadonlyArray2<'_, f64>, name: &str, f: usize) -> PyResult<Vec<Vector3<f64>>> {
+    let (v, n) = rows(a, name, 3)?;
+    if n != f {
+        return Err(PyValueError::new_err(format!(
+            "{name}: expected ({f}, 3), one row per camera frame, got ({n}, 3)"
+        )));
+    }
+    map(socialcore::error::ensure_finite(name, &v))?;
+    Ok((0..n)
+        .map(|i| Vector3::new(v[3 * i], v[3 * i + 1], v[3 * i + 2]))
+        .collect())
+}
+
+fn times_of(t: &PyReadonlyArray1<'_, f64>, f: usize) -> PyResult<Vec<f64>> {
+    let v = vec1(t);
+    if v.len() != f {
+        return Err(PyValueError::new_err(format!(
+            "times: expected ({f},), got ({},)",
+            v.len()
+        )));
+    }
+    Ok(v)
+}
+
+fn art_options(
+    k: usize,
+    refine: bool,
+    time_limit: Option<f64>,
+    node_limit: Option<u64>,
+    fit_radius: bool,
+) -> PyResult<ArticulatedOptions> {
+    Ok(ArticulatedOptions {
+        k,
+        refine,
+        fit_radius,
+        bqp: bqp_options(time_limit, node_limit)?,
+        ..ArticulatedOptions::default()
+    })
+}
+
+/// Result of one joint as a dict of arrays and numbers.
+fn result_dict<'py>(
+    py: Python<'py>,
+    r: ArticulatedResult,
+) -> PyResult<Bound<'py, pyo3::types::PyDict>> {
+    let d = pyo3::types::PyDict::new(py);
+    let f = r.points.len();
+    let mut pts = Array2::<f64>::zeros((f, 3));
+    for (i, p) in r.points.iter().enumerate() {
+        for j in 0..3 {
+            pts[[i, j]] = p[j];
+        }
+    }
+    d.set_item("X", pts.into_pyarray(py))?;
+    d.set_item("radius", r.radius)?;
+    d.set_item(
+        "coeffs_theta",
+        Array1::from(r.coeffs_theta).into_pyarray(py),
+    )?;
+    d.set_item("coeffs_phi", Array1::from(r.coeffs_phi).into_pyarray(py))?;
+    d.set_item("bqp_size", r.bqp_size)?;
+    d.set_item("bqp_objective", r.bqp.objective)?;
+    d.set_item("bqp_gap", r.bqp.gap)?;
+    d.set_item("bqp_nodes", r.bqp.nodes)?;
+    d.set_item("bqp_optimal", r.bqp.optimal)?;
+    d.set_item("n_observed", r.n_observed)?;
+    d.set_item("reprojection_rms", r.reprojection_rms)?;
+    d.set_item("lm_iterations", r.lm_iterations)?;
+    d.set_item("converged", r.converged)?;
+    Ok(d)
+}
+
+/// One articulated trajectory (Eq 4.5–4.12); returns a dict (see `_core.pyi`).
+#[pyfunction]
+#[pyo3(signature = (k_mat, r_mat, c_mat, x, parent, times, length, k, refine=true, time_limit=None, node_limit=None, fit_radius=false))]
+#[allow(clippy::too_many_arguments)]
+fn reconstruct_articulated<'py>(
+    py: Python<'py>,
+    k_mat: PyReadonlyArray3<'py, f64>,
+    r_mat: PyReadonlyArray3<'py, f64>,
+    c_mat: PyReadonlyArray2<'py, f64>,
+    x: PyReadonlyArray2<'py, f64>,
+    parent: PyReadonlyArray2<'py, f64>,
+    times: PyReadonlyArray1<'py, f64>,
+    length: f64,
+    k: usize,
+    refine: bool,
+    time_limit: Option<f64>,
+    node_limit: Option<u64>,
+    fit_radius: bool,
+) -> PyResult<Bound<'py, pyo3::types::PyDict>> {
+    let cams = cameras(&k_mat, &r_mat, &c_mat)?;
+    let f = cams.len();
+    let px = pixels_2d(&x, f)?;
+    let par = points(&parent, "parent", f)?;
+    let t = times_of(&times, f)?;
+    let opts = art_options(k, refine, time_limit, node_limit, fit_radius)?;
+    let r = detach(py, || {
+        art::reconstruct_articulated(&cams, &px, &par, &t, length, &opts)
+    })?;
+    result_dict(py, r)
+}
+
+/// Whole skeleton from its root (Eq 4.6): `(X (F,J,3), [dict or None per joint])`.
+#[pyfunction]
+#[pyo3(signature = (k_mat, r_mat, c_mat, x, parents, lengths, root, times, k, refine=true, time_limit=None, node_limit=None, fit_radius=false))]
+#[allow(clippy::too_many_arguments)]
+fn reconstruct_skeleton<'py>(
+    py: Python<'py>,
+    k_mat: PyReadonlyArray3<'py, f64>,
+    r_mat: PyReadonlyArray3<'py, f64>,
+    c_mat: PyReadonlyArray2<'py, f64>,
+    x: PyReadonlyArray3<'py, f64>,
+    parents: Vec<i64>,
+    lengths: Vec<f64>,
+    root: PyReadonlyArray2<'py, f64>,
+    times: PyReadonlyArray1<'py, f64>,
+    k: usize,
+    refine: bool,
+    time_limit: Option<f64>,
+    node_limit: Option<u64>,
+    fit_radius: bool,
+) -> PyResult<(
+    Bound<'py, PyArray3<f64>>,
+    Vec<Option<Bound<'py, pyo3::types::PyDict>>>,
+)> {
+    let sk = skeleton(parents, lengths)?;
+    let cams = cameras(&k_mat, &r_mat, &c_mat)?;
+    let f = cams.len();
+    let nj = sk.n_joints();
+    let xv = x.as_array();
+    let s = xv.shape();
+    if s[0] != f || s[1] != nj || s[2] != 2 {
+        return Err(PyValueError::new_err(format!(
+            "x: expected ({f}, {nj}, 2) pixels, got ({}, {}, {})",
+            s[0], s[1], s[2]
+        )));
+    }
+    let mut px = vec![vec![None; nj]; f];
+    for i in 0..f {
+        for j in 0..nj {
+            let (u, v) = (xv[[i, j, 0]], xv[[i, j, 1]]);
+            px[i][j] = match (u.is_nan(), v.is_nan()) {
+                (true, true) => None,
+                (false, false) if u.is_finite() && v.is_finite() => Some(Vector2::new(u, v)),
+                _ => {
+                    return Err(PyValueError::new_err(format!(
+                        "x: frame {i}, joint {j} must be finite or entirely NaN (missing)"
+                    )))
+                }
+            };
+        }
+    }
+    let rt = points(&root, "root", f)?;
+    let t = times_of(&times, f)?;
+    let opts = art_options(k, refine, time_limit, node_limit, fit_radius)?;
+    let (pos, res) = detach(py, || {
+        art::reconstruct_skeleton(&cams, &px, &sk, &rt, &t, &opts)
+    })?;
+    let mut out = Array3::<f64>::zeros((f, nj, 3));
+    for i in 0..f {
+        for j in 0..nj {
+            for c in 0..3 {
+                out[[i, j, c]] = pos[i][j][c];
+            }
+        }
+    }
+    let dicts = res
+        .into_iter()
+        .map(|r| r.map(|r| result_dict(py, r)).transpose())
+        .collect::<PyResult<Vec<_>>>()?;
+    Ok((out.into_pyarray(py), dicts))
+}
+
+fn skeleton(parents: Vec<i64>, lengths: Vec<f64>) -> PyResult<Skeleton> {
+    let j = parents.len() as i64;
+    let p = parents
+        .iter()
+        .enumerate()
+        .map(|(i, &p)| {
+            if p == -1 {
+                Ok(None)
+            } else if p < 0 || p >= j {
+                Err(PyValueError::new_err(format!(
+                    "parents: joint {i} has parent {p}, out of range (−1 for the root, else 0..{j})"
+                )))
+            } else {
+                Ok(Some(p as usize))
+            }
+        })
+        .collect::<PyResult<Vec<_>>>()?;
+    map(Skeleton::new(p, lengths))
+}
+
+/// Validates a skeleton (tree) and returns its parents-first joint order.
+#[pyfunction]
+fn skeleton_order(parents: Vec<i64>, lengths: Vec<f64>) -> PyResult<Vec<usize>> {
+    Ok(skeleton(parents, lengths)?.order().to_vec())
+}
+
+/// Reconstructability η_a (Eq 4.13) of a known child trajectory.
+#[pyfunction]
+#[allow(clippy::too_many_arguments)]
+fn articulated_reconstructability(
+    k_mat: PyReadonlyArray3<'_, f64>,
+    r_mat: PyReadonlyArray3<'_, f64>,
+    c_mat: PyReadonlyArray2<'_, f64>,
+    parent: PyReadonlyArray2<'_, f64>,
+    child: PyReadonlyArray2<'_, f64>,
+    times: PyReadonlyArray1<'_, f64>,
+    k: usize,
+) -> PyResult<f64> {
+    let cams: Vec<Camera> = cameras(&k_mat, &r_mat, &c_mat)?;
+    let f = cams.len();
+    let par = points(&parent, "parent", f)?;
+    let ch = points(&child, "child", f)?;
+    let t = times_of(&times, f)?;
+    map(art::reconstructability(&cams, &par, &ch, &t, k))
+}
+
+/// The BQP of Eq 4.12 for one joint: `(Q (n,n), c (n,), constant)`.
+#[pyfunction]
+#[pyo3(signature = (k_mat, r_mat, c_mat, x, parent, times, length, k, fit_radius=false))]
+#[allow(clippy::too_many_arguments)]
+fn articulated_bqp<'py>(
+    py: Python<'py>,
+    k_mat: PyReadonlyArray3<'py, f64>,
+    r_mat: PyReadonlyArray3<'py, f64>,
+    c_mat: PyReadonlyArray2<'py, f64>,
+    x: PyReadonlyArray2<'py, f64>,
+    parent: PyReadonlyArray2<'py, f64>,
+    times: PyReadonlyArray1<'py, f64>,
+    length: f64,
+    k: usize,
+    fit_radius: bool,
+) -> PyResult<(Bound<'py, PyArray2<f64>>, Bound<'py, PyArray1<f64>>, f64)> {
+    let cams = cameras(&k_mat, &r_mat, &c_mat)?;
+    let f = cams.len();
+    let px = pixels_2d(&x, f)?;
+    let par = points(&parent, "parent", f)?;
+    let t = times_of(&times, f)?;
+    if !(length.is_finite() && length > 0.0) {
+        return Err(PyValueError::new_err(format!(
+            "length: must be positive, got {length}"
+        )));
+    }
+    if k == 0 {
+        return Err(PyValueError::new_err("k: must be at least 1"));
+    }
+    let span = map(socialcore::basis::DctSpan::from_times(&t))?;
+    let theta = map(span.matrix(&t, k))?;
+    let cand = map(art::candidates(&cams, &px, &par, length, fit_radius))?;
+    let (p, constant, _) = map(art::articulated_qp(&cand, &theta))?;
+    let n = p.n();
+    let mut q = Array2::<f64>::zeros((n, n));
+    let mut c = Array1::<f64>::zeros(n);
+    let (qf, cf) = p.coefficients();
+    for i in 0..n {
+        c[i] = cf[i];
+        for j in 0..n {
+            q[[i, j]] = qf[i * n + j];
+        }
+    }
+    Ok((q.into_pyarray(py), c.into_pyarray(py), constant))
+}
+
+pub fn register(m: &Bound<'_, PyModule>) -> PyResult<()> {
+    m.add_function(wrap_pyfunction!(solve_bqp, m)?)?;
+    m.add_function(wrap_pyfunction!(reconstruct_articulated, m)?)?;
+    m.add_function(wrap_pyfunction!(reconstruct_skeleton, m)?)?;
+    m.add_function(wrap_pyfunction!(skeleton_order, m)?)?;
+    m.add_function(wrap_pyfunction!(articulated_reconstructability, m)?)?;
+    m.add_function(wrap_pyfunction!(articulated_bqp, m)?)?;
+    Ok(())
+}

@@ -1,0 +1,716 @@
+//! Articulated trajectories from one camera per frame (thesis Chapter 4).
+//!
+//! A child joint stays at distance `r` from its known parent trajectory `X_p(t)`. Each
+//! frame's ray meets the sphere of radius `r` about the parent twice (Eq 4.8–4.9); choosing
+//! one intersection per frame so that the relative directions are best explained by a
+//! DCT trajectory basis `Θ` is the binary quadratic program of Eq 4.10–4.12, solved
+//! exactly by [`crate::bqp`]. The chosen directions are projected onto the basis in
+//! spherical coordinates (Eq 4.4, with angle unwrapping) and refined by Levenberg–Marquardt
+//! on the reprojection error (Eq 4.5). Frames without an observation are imputed by the
+//! basis. Whole skeletons are reconstructed from the root outwards (Eq 4.6).
+
+// Index loops mirror the equations in these dense numeric kernels.
+#![allow(clippy::needless_range_loop)]
+
+use crate::basis::DctSpan;
+use crate::bqp::{solve_bqp, BqpOptions, BqpProblem, BqpSolution};
+use crate::error::{ensure_finite, Error, Result};
+use crate::geometry::{line_point_distance, ray_sphere, Camera, LmOptions};
+use nalgebra::{DMatrix, DVector, Matrix3, Vector2, Vector3};
+use std::f64::consts::{PI, TAU};
+
+/// Settings of [`reconstruct_articulated`].
+#[derive(Debug, Clone, Copy)]
+pub struct ArticulatedOptions {
+    /// Number of DCT basis vectors `K` per angle.
+    pub k: usize,
+    /// Run the Levenberg–Marquardt refinement of Eq 4.5.
+    pub refine: bool,
+    pub lm: LmOptions,
+    /// Limits of the branch-and-bound (on a limit the best incumbent is used).
+    pub bqp: BqpOptions,
+    /// Set the sphere radius to the largest parent-to-ray distance over the observed
+    /// frames, shrinking an over-estimated length as well as enlarging a short one. The
+    /// thesis only enlarges (Sec 4.4.1, the default); fitting assumes that the bone passes
+    /// at least once near perpendicular to the viewing ray, and makes the reconstruction
+    /// robust to over-estimated lengths and root error (see the report of issue 4).
+    pub fit_radius: bool,
+}
+
+impl Default for ArticulatedOptions {
+    fn default() -> Self {
+        ArticulatedOptions {
+            k: 8,
+            refine: true,
+            lm: LmOptions {
+                max_iterations: 100,
+                rel_tol: 1e-10,
+            },
+            bqp: BqpOptions::default(),
+            fit_radius: false,
+        }
+    }
+}
+
+/// One reconstructed articulated trajectory.
+#[derive(Debug, Clone)]
+pub struct ArticulatedResult {
+    /// Child position at every frame (missing frames imputed), world metres.
+    pub points: Vec<Vector3<f64>>,
+    /// Bone length used: the given length, enlarged so that every ray meets the sphere
+    /// (Sec 4.4.1).
+    pub radius: f64,
+    /// Rows: the spherical frame (`e1`, `e2`, pole) in world coordinates.
+    pub frame: Matrix3<f64>,
+    /// DCT coefficients of the inclination `θ(t)` and azimuth `φ(t)` (radians).
+    pub coeffs_theta: Vec<f64>,
+    pub coeffs_phi: Vec<f64>,
+    /// The binary program (variables = ambiguous observed frames) and its solution.
+    pub bqp: BqpSolution,
+    /// Number of BQP variables.
+    pub bqp_size: usize,
+    /// Observed frames.
+    pub n_observed: usize,
+    /// RMS reprojection error over the observed frames, pixels.
+    pub reprojection_rms: f64,
+    /// LM iterations and whether its tolerance was met (true when not refined).
+    pub lm_iterations: usize,
+    pub converged: bool,
+}
+
+/// The candidate geometry of one joint: both intersections per observed frame.
+#[derive(Debug, Clone)]
+pub struct Candidates {
+    /// Observed frame indices (time order of the input).
+    pub frames: Vec<usize>,
+    /// Unit relative directions `¹χ_i`, `²χ_i` (Eq 4.10) per observed frame.
+    pub chi1: Vec<Vector3<f64>>,
+    pub chi2: Vec<Vector3<f64>>,
+    /// Radius after enlargement.
+    pub radius: f64,
+}
+
+fn validate_common(
+    cameras: &[Camera],
+    pixels: &[Option<Vector2<f64>>],
+    parent: &[Vector3<f64>],
+    times: &[f64],
+    length: f64,
+) -> Result<()> {
+    let f = cameras.len();
+    if !(length.is_finite() && length > 0.0) {
+        return Err(Error::invalid(
+            "length",
+            format!("must be positive and finite, got {length}"),
+        ));
+    }
+    if pixels.len() != f || parent.len() != f || times.len() != f {
+        return Err(Error::invalid(
+            "x/parent/times",
+            format!(
+                "need one entry per camera frame ({f}), got x {}, parent {}, times {}",
+                pixels.len(),
+                parent.len(),
+                times.len()
+            ),
+        ));
+    }
+    ensure_finite("times", times)?;
+    for (i, p) in parent.iter().enumerate() {
+        if !p.iter().all(|v| v.is_finite()) {
+            return Err(Error::invalid(
+                "parent",
+                format!("frame {i} is not finite (the parent trajectory must be complete)"),
+            ));
+        }
+    }
+    for (i, u) in pixels.iter().enumerate() {
+        if let Some(u) = u {
+            if !u.iter().all(|v| v.is_finite()) {
+                return Err(Error::invalid(
+                    "x",
+                    format!("frame {i}: a pixel must be finite or the whole row NaN"),
+                ));
+            }
+        }
+    }
+    Ok(())
+}
+
+/// Both ray–sphere intersections per observed frame (Eq 4.8–4.9), after enlarging the
+/// radius to the largest parent-to-ray distance when some ray misses (Sec 4.4.1), or
+/// setting it to that distance when `fit_radius`. A candidate behind the camera is
+/// replaced by the other one.
+pub fn candidates(
+    cameras: &[Camera],
+    pixels: &[Option<Vector2<f64>>],
+    parent: &[Vector3<f64>],
+    length: f64,
+    fit_radius: bool,
+) -> Result<Candidates> {
+    let mut frames = Vec::new();
+    let mut rays = Vec::new();
+    let mut farthest: f64 = 0.0;
+    for (i, u) in pixels.iter().enumerate() {
+        if let Some(u) = u {
+            let v = cameras[i].ray_direction(u);
+            farthest = farthest.max(line_point_distance(&cameras[i].c, &v, &parent[i]));
+            frames.push(i);
+            rays.push(v);
+        }
+    }
+    let radius = if fit_radius && farthest > 0.0 {
+        farthest
+    } else {
+        length.max(farthest)
+    };
+    let mut chi1 = Vec::with_capacity(frames.len());
+    let mut chi2 = Vec::with_capacity(frames.len());
+    for (&i, v) in frames.iter().zip(&rays) {
+        let c = cameras[i].c;
+        let xp = parent[i];
+        let (s1, s2) = match ray_sphere(&c, v, &xp, radius) {
+            Some(s) => s,
+            None => {
+                // Tangent within rounding: the closest point of the line.
+                let s = v.dot(&(xp - c)) / v.norm_squared();
+                (s, s)
+            }
+        };
+        let (s1, s2) = match (s1 > 0.0, s2 > 0.0) {
+            (true, false) => (s1, s1),
+            (false, true) => (s2, s2),
+            _ => (s1, s2),
+        };
+        let unit = |s: f64| -> Vector3<f64> {
+            let d = c + v * s - xp;
+            let n = d.norm();
+            if n > 0.0 {
+                d / n
+            } else {
+                Vector3::z()
+            }
+        };
+        chi1.push(unit(s1));
+        chi2.push(unit(s2));
+    }
+    Ok(Candidates {
+        frames,
+        chi1,
+        chi2,
+        radius,
+    })
+}
+
+/// Orthonormal basis of the span of the observed rows of `Θ` (thin QR), `n_obs × K`.
+fn observed_basis(theta_obs: &DMatrix<f64>) -> Result<DMatrix<f64>> {
+    let (m, k) = theta_obs.shape();
+    if m < k {
+        return Err(Error::degenerate(format!(
+            "{m} observed frames cannot determine k = {k} basis coefficients"
+        )));
+    }
+    let qr = theta_obs.clone().qr();
+    let r = qr.r();
+    let rmax = r.diagonal().amax();
+    if r.diagonal().iter().any(|d| d.abs() <= 1e-10 * rmax) {
+        return Err(Error::degenerate(
+            "the observed frames make the trajectory basis rank deficient",
+        ));
+    }
+    Ok(qr.q())
+}
+
+/// The BQP of Eq 4.12, `min ‖P⊥(E b + F)‖²` with `P⊥` the projector off the basis of the
+/// observed frames: returns `(Q, c, constant, ambiguous)` such that the cost equals
+/// `bᵀQb + cᵀb + constant` over the `ambiguous` observed positions (`¹χ ≠ ²χ`).
+pub fn articulated_qp(
+    cand: &Candidates,
+    theta: &DMatrix<f64>,
+) -> Result<(BqpProblem, f64, Vec<usize>)> {
+    let m = cand.frames.len();
+    let k = theta.ncols();
+    let theta_obs = DMatrix::from_fn(m, k, |a, j| theta[(cand.frames[a], j)]);
+    let q1 = observed_basis(&theta_obs)?;
+    // P⊥ = I − Q1 Q1ᵀ.
+    let mut pperp = -(&q1 * q1.transpose());
+    for a in 0..m {
+        pperp[(a, a)] += 1.0;
+    }
+    let fmat = DMatrix::from_fn(m, 3, |a, c| cand.chi2[a][c]);
+    let pf = &pperp * &fmat;
+    let constant = fmat.dot(&pf);
+    let amb: Vec<usize> = (0..m)
+        .filter(|&a| (cand.chi1[a] - cand.chi2[a]).norm() > 1e-12)
+        .collect();
+    let n = amb.len();
+    let d: Vec<Vector3<f64>> = amb.iter().map(|&a| cand.chi1[a] - cand.chi2[a]).collect();
+    let mut q = vec![0.0; n * n];
+    let mut c = vec![0.0; n];
+    for (i, &a) in amb.iter().enumerate() {
+        for (j, &b) in amb.iter().enumerate() {
+            q[i * n + j] = d[i].dot(&d[j]) * pperp[(a, b)];
+        }
+        let pfa = Vector3::new(pf[(a, 0)], pf[(a, 1)], pf[(a, 2)]);
+        c[i] = 2.0 * d[i].dot(&pfa);
+    }
+    Ok((BqpProblem::from_row_major(n, q, c)?, constant, amb))
+}
+
+/// Spherical frame whose pole is the direction the unit vectors vary least along (they
+/// stay near its equator, away from the coordinate singularity).
+fn spherical_frame(dirs: &[Vector3<f64>]) -> Matrix3<f64> {
+    let mut s = Matrix3::zeros();
+    for d in dirs {
+        s += d * d.transpose();
+    }
+    let eig = s.symmetric_eigen();
+    let mut idx = [0usize, 1, 2];
+    idx.sort_by(|&a, &b| eig.eigenvalues[b].total_cmp(&eig.eigenvalues[a]));
+    let e1: Vector3<f64> = eig.eigenvectors.column(idx[0]).into();
+    let e2: Vector3<f64> = eig.eigenvectors.column(idx[1]).into();
+    let pole = e1.cross(&e2);
+    Matrix3::from_rows(&[e1.transpose(), e2.transpose(), pole.transpose()])
+}
+
+fn to_angles(frame: &Matrix3<f64>, d: &Vector3<f64>) -> (f64, f64) {
+    let l = frame * d;
+    (l.z.clamp(-1.0, 1.0).acos(), l.y.atan2(l.x))
+}
+
+fn from_angles(frame: &Matrix3<f64>, th: f64, ph: f64) -> Vector3<f64> {
+    let (st, ct) = th.sin_cos();
+    let (sp, cp) = ph.sin_cos();
+    frame.transpose() * Vector3::new(st * cp, st * sp, ct)
+}
+
+/// Among all spherical representations of a direction, `(θ + 2πk, φ + 2πm)` and
+/// `(−θ + 2πk, φ + π + 2πm)`, the one nearest to the previous frame's (end of Sec 4.2.2).
+fn unwrap_angles(raw: &[(f64, f64)]) -> Vec<(f64, f64)> {
+    let mut out: Vec<(f64, f64)> = Vec::with_capacity(raw.len());
+    for &(th, ph) in raw {
+        let Some(&(pt, pp)) = out.last() else {
+            out.push((th, ph));
+            continue;
+        };
+        let near = |base: f64, target: f64| base + TAU * ((target - base) / TAU).round();
+        let a = (near(th, pt), near(ph, pp));
+        let b = (near(-th, pt), near(ph + PI, pp));
+        let da = (a.0 - pt).powi(2) + (a.1 - pp).powi(2);
+        let db = (b.0 - pt).powi(2) + (b.1 - pp).powi(2);
+        out.push(if db < da { b } else { a });
+    }
+    out
+}
+
+fn least_squares(theta_obs: &DMatrix<f64>, y: &DVector<f64>) -> Result<DVector<f64>> {
+    let svd = theta_obs.clone().svd(true, true);
+    svd.solve(y, 1e-12)
+        .map_err(|e| Error::degenerate(format!("basis least squares failed: {e}")))
+}
+
+/// Reconstructs one articulated trajectory (Eq 4.5–4.12): `pixels[i]` is the child's pixel
+/// in `cameras[i]` at `times[i]` (`None` = missing), `parent[i]` the parent's world position.
+pub fn reconstruct_articulated(
+    cameras: &[Camera],
+    pixels: &[Option<Vector2<f64>>],
+    parent: &[Vector3<f64>],
+    times: &[f64],
+    length: f64,
+    opts: &ArticulatedOptions,
+) -> Result<ArticulatedResult> {
+    validate_common(cameras, pixels, parent, times, length)?;
+    if opts.k == 0 {
+        return Err(Error::invalid("k", "must be at least 1"));
+    }
+    let f = cameras.len();
+    let span = DctSpan::from_times(times)?;
+    let theta = span.matrix(times, opts.k)?;
+    let cand = candidates(cameras, pixels, parent, length, opts.fit_radius)?;
+    let m = cand.frames.len();
+    if m < opts.k {
+        return Err(Error::degenerate(format!(
+            "{m} observed frames cannot determine k = {} basis coefficients",
+            opts.k
+        )));
+    }
+    let (problem, _constant, amb) = articulated_qp(&cand, &theta)?;
+    let sol = solve_bqp(&problem, &opts.bqp)?;
+    // χ = E b + F (Eq 4.11): b = 1 picks ¹χ.
+    let mut chi = cand.chi2.clone();
+    for (i, &a) in amb.iter().enumerate() {
+        if sol.x[i] {
+            chi[a] = cand.chi1[a];
+        }
+    }
+
+    // Projection on the spherical basis with unwrapping, in time order.
+    let frame = spherical_frame(&chi);
+    let mut order: Vec<usize> = (0..m).collect();
+    order.sort_by(|&a, &b| times[cand.frames[a]].total_cmp(&times[cand.frames[b]]));
+    let raw: Vec<(f64, f64)> = order.iter().map(|&a| to_angles(&frame, &chi[a])).collect();
+    let unwrapped = unwrap_angles(&raw);
+    let k = opts.k;
+    let theta_obs = DMatrix::from_fn(m, k, |r, j| theta[(cand.frames[order[r]], j)]);
+    let yt = DVector::from_fn(m, |r, _| unwrapped[r].0);
+    let yp = DVector::from_fn(m, |r, _| unwrapped[r].1);
+    let mut at = least_squares(&theta_obs, &yt)?;
+    let mut ap = least_squares(&theta_obs, &yp)?;
+
+    let obs: Vec<(usize, Vector2<f64>)> = order
+        .iter()
+        .filter_map(|&a| {
+            let i = cand.frames[a];
+            pixels[i].map(|u| (i, u))
+        })
+        .collect();
+    let radius = cand.radius;
+    let point = |i: usize, at: &DVector<f64>, ap: &DVector<f64>| -> Vector3<f64> {
+        let row = theta.row(i);
+        let th = row.dot(&at.transpose());
+        let ph = row.dot(&ap.transpose());
+        parent[i] + from_angles(&frame, th, ph) * radius
+    };
+    let cost = |at: &DVector<f64>, ap: &DVector<f64>| -> f64 {
+        obs.iter()
+            .map(|&(i, u)| {
+                let (p, _) = cameras[i].project(&point(i, at, ap));
+                (p - u).norm_squared()
+            })
+            .sum()
+    };
+
+    let mut lm_iterations = 0;
+    let mut converged = true;
+    if opts.refine {
+        (at, ap, lm_iterations, converged) = refine(
+            cameras, &obs, parent, &theta, &frame, radius, at, ap, &opts.lm, &cost,
+        );
+    }
+    let points: Vec<Vector3<f64>> = (0..f).map(|i| point(i, &at, &ap)).collect();
+    let c = cost(&at, &ap);
+    let reprojection_rms = (c / obs.len().max(1) as f64).sqrt();
+    Ok(ArticulatedResult {
+        points,
+        radius,
+        frame,
+        coeffs_theta: at.iter().copied().collect(),
+        coeffs_phi: ap.iter().copied().collect(),
+        bqp_size: problem.n(),
+        bqp: sol,
+        n_observed: m,
+        reprojection_rms,
+        lm_iterations,
+        converged,
+    })
+}
+
+/// Levenberg–Marquardt on Eq 4.5 over the `2K` angle coefficients, bone length fixed.
+#[allow(clippy::too_many_arguments)]
+fn refine(
+    cameras: &[Camera],
+    obs: &[(usize, Vector2<f64>)],
+    parent: &[Vector3<f64>],
+    theta: &DMatrix<f64>,
+    frame: &Matrix3<f64>,
+    radius: f64,
+    mut at: DVector<f64>,
+    mut ap: DVector<f64>,
+    opts: &LmOptions,
+    cost_of: &dyn Fn(&DVector<f64>, &DVector<f64>) -> f64,
+) -> (DVector<f64>, DVector<f64>, usize, bool) {
+    let k = at.len();
+    let np = 2 * k;
+    let mut cost = cost_of(&at, &ap);
+    if !cost.is_finite() {
+        return (at, ap, 0, false);
+    }
+    let ft = frame.transpose();
+    let mut lambda = 1e-3;
+    for it in 0..opts.max_iterations {
+        let mut jtj = DMatrix::<f64>::zeros(np, np);
+        let mut jtr = DVector::<f64>::zeros(np);
+        let mut jrow_u = DVector::<f64>::zeros(np);
+        let mut jrow_v = DVector::<f64>::zeros(np);
+        for &(i, u) in obs {
+            let row = theta.row(i);
+            let th = row.dot(&at.transpose());
+            let ph = row.dot(&ap.transpose());
+            let (st, ct) = th.sin_cos();
+            let (sp, cp) = ph.sin_cos();
+            let x = parent[i] + ft * Vector3::new(st * cp, st * sp, ct) * radius;
+            let dth = ft * Vector3::new(ct * cp, ct * sp, -st) * radius;
+            let dph = ft * Vector3::new(-st * sp, st * cp, 0.0) * radius;
+            let cam = &cameras[i];
+            let kr = cam.k * cam.r;
+            let h = kr * (x - cam.c);
+            let (pu, pv) = (h.x / h.z, h.y / h.z);
+            let iz = 1.0 / h.z;
+            let ju = (kr.row(0) - pu * kr.row(2)) * iz;
+            let jv = (kr.row(1) - pv * kr.row(2)) * iz;
+            let (ut, up) = ((ju * dth)[0], (ju * dph)[0]);
+            let (vt, vp) = ((jv * dth)[0], (jv * dph)[0]);
+            for j in 0..k {
+                jrow_u[j] = ut * row[j];
+                jrow_u[k + j] = up * row[j];
+                jrow_v[j] = vt * row[j];
+                jrow_v[k + j] = vp * row[j];
+            }
+            let (ru, rv) = (pu - u.x, pv - u.y);
+            jtj.ger(1.0, &jrow_u, &jrow_u, 1.0);
+            jtj.ger(1.0, &jrow_v, &jrow_v, 1.0);
+            jtr.axpy(ru, &jrow_u, 1.0);
+            jtr.axpy(rv, &jrow_v, 1.0);
+        }
+        if jtr.amax() <= 1e-14 * (1.0 + cost.sqrt()) {
+            return (at, ap, it, true);
+        }
+        let mut improved = false;
+        for _ in 0..20 {
+            let mut a = jtj.clone();
+            for d in 0..np {
+                a[(d, d)] += lambda * jtj[(d, d)].max(1e-12);
+            }
+            let Some(step) = a.cholesky().map(|ch| ch.solve(&(-&jtr))) else {
+                lambda *= 10.0;
+                continue;
+            };
+            let nt = &at + step.rows(0, k);
+            let npv = &ap + step.rows(k, k);
+            let cn = cost_of(&nt, &npv);
+            if cn.is_finite() && cn <= cost {
+                let rel = (cost - cn) / cost.max(f64::MIN_POSITIVE);
+                at = nt;
+                ap = npv;
+                cost = cn;
+                lambda = (lambda * 0.3).max(1e-12);
+                improved = true;
+                if rel < opts.rel_tol {
+                    return (at, ap, it + 1, true);
+                }
+                break;
+            }
+            lambda *= 10.0;
+        }
+        if !improved {
+            return (at, ap, it + 1, true);
+        }
+    }
+    (at, ap, opts.max_iterations, false)
+}
+
+/// Reconstructability η_a (Eq 4.13) of a known articulated trajectory: the ratio of the
+/// parts of the impostor and of the true relative trajectories that the basis cannot
+/// span, `‖P⊥ χ_C‖ / ‖P⊥ χ_X‖`, measured on the unit relative directions (the quantities
+/// of Eq 4.12) rather than on a planar angle. `η_a ≫ 1` means the BQP picks the truth.
+pub fn reconstructability(
+    cameras: &[Camera],
+    parent: &[Vector3<f64>],
+    child: &[Vector3<f64>],
+    times: &[f64],
+    k: usize,
+) -> Result<f64> {
+    let f = cameras.len();
+    if parent.len() != f || child.len() != f || times.len() != f {
+        return Err(Error::invalid(
+            "parent/child/times",
+            "need one entry per camera frame",
+        ));
+    }
+    if k == 0 || k > f {
+        return Err(Error::invalid("k", format!("must be in 1..={f}")));
+    }
+    let span = DctSpan::from_times(times)?;
+    let theta = span.matrix(times, k)?;
+    let mut truth = DMatrix::zeros(f, 3);
+    let mut impostor = DMatrix::zeros(f, 3);
+    for i in 0..f {
+        let d = child[i] - parent[i];
+        let r = d.norm();
+        if !(r.is_finite() && r > 0.0) {
+            return Err(Error::invalid(
+                "child",
+                format!("frame {i}: must differ from the parent and be finite"),
+            ));
+        }
+        let v = child[i] - cameras[i].c;
+        let other = match ray_sphere(&cameras[i].c, &v, &parent[i], r) {
+            Some((s1, s2)) => {
+                // The truth is at s = 1; the impostor is the other root.
+                let s = if (s1 - 1.0).abs() < (s2 - 1.0).abs() {
+                    s2
+                } else {
+                    s1
+                };
+                cameras[i].c + v * s - parent[i]
+            }
+            None => d,
+        };
+        for c in 0..3 {
+            truth[(i, c)] = d[c] / r;
+            impostor[(i, c)] = other[c] / r;
+        }
+    }
+    let q1 = observed_basis(&theta)?;
+    let perp = |m: &DMatrix<f64>| -> f64 { (m - &q1 * (q1.transpose() * m)).norm() };
+    let (nc, nx) = (perp(&impostor), perp(&truth));
+    Ok(if nx > 0.0 { nc / nx } else { f64::INFINITY })
+}
+
+#[cfg(test)]
+mod tests;
+
+/// A kinematic tree: `parents[j]` is the parent joint of `j` (`None` for the one root) and
+/// `lengths[j]` the length of the bone from the parent to `j` (ignored for the root).
+#[derive(Debug, Clone, PartialEq)]
+pub struct Skeleton {
+    parents: Vec<Option<usize>>,
+    lengths: Vec<f64>,
+    /// Joints in an order where every parent precedes its children, root first.
+    order: Vec<usize>,
+}
+
+impl Skeleton {
+    /// Validates a tree: exactly one root, parents in range, no cycle, positive finite
+    /// lengths on every bone.
+    pub fn new(parents: Vec<Option<usize>>, lengths: Vec<f64>) -> Result<Self> {
+        let j = parents.len();
+        if lengths.len() != j {
+            return Err(Error::invalid(
+                "lengths",
+                format!("expected one length per joint ({j}), got {}", lengths.len()),
+            ));
+        }
+        if j == 0 {
+            return Err(Error::invalid("parents", "the skeleton has no joint"));
+        }
+        let roots: Vec<usize> = (0..j).filter(|&i| parents[i].is_none()).collect();
+        if roots.len() != 1 {
+            return Err(Error::invalid(
+                "parents",
+                format!(
+                    "a tree needs exactly one root, found {} ({roots:?})",
+                    roots.len()
+                ),
+            ));
+        }
+        let mut children = vec![Vec::new(); j];
+        for (i, p) in parents.iter().enumerate() {
+            if let Some(p) = *p {
+                if p >= j {
+                    return Err(Error::invalid(
+                        "parents",
+                        format!("joint {i} has parent {p}, out of range 0..{j}"),
+                    ));
+                }
+                if p == i {
+                    return Err(Error::invalid(
+                        "parents",
+                        format!("joint {i} is its own parent"),
+                    ));
+                }
+                if !(lengths[i].is_finite() && lengths[i] > 0.0) {
+                    return Err(Error::invalid(
+                        "lengths",
+                        format!("bone of joint {i} must be positive, got {}", lengths[i]),
+                    ));
+                }
+                children[p].push(i);
+            }
+        }
+        let mut order = Vec::with_capacity(j);
+        let mut queue = std::collections::VecDeque::from([roots[0]]);
+        while let Some(i) = queue.pop_front() {
+            order.push(i);
+            queue.extend(children[i].iter().copied());
+        }
+        if order.len() != j {
+            let unreached: Vec<usize> = (0..j).filter(|i| !order.contains(i)).collect();
+            return Err(Error::invalid(
+                "parents",
+                format!(
+                    "not a tree: joints {unreached:?} lie on a cycle, unreachable from the root"
+                ),
+            ));
+        }
+        Ok(Skeleton {
+            parents,
+            lengths,
+            order,
+        })
+    }
+
+    pub fn n_joints(&self) -> usize {
+        self.parents.len()
+    }
+    pub fn parents(&self) -> &[Option<usize>] {
+        &self.parents
+    }
+    pub fn lengths(&self) -> &[f64] {
+        &self.lengths
+    }
+    /// Parents-before-children order, root first.
+    pub fn order(&self) -> &[usize] {
+        &self.order
+    }
+    pub fn root(&self) -> usize {
+        self.order[0]
+    }
+}
+
+/// Positions `[frame][joint]` and one result per joint (`None` for the root).
+pub type SkeletonReconstruction = (Vec<Vec<Vector3<f64>>>, Vec<Option<ArticulatedResult>>);
+
+/// Reconstructs every joint from the root trajectory outwards (forward kinematics, Eq 4.6):
+/// `pixels[i][j]` is joint `j` in frame `i`. Returns positions `[frame][joint]` and one
+/// result per non-root joint (`None` for the root).
+pub fn reconstruct_skeleton(
+    cameras: &[Camera],
+    pixels: &[Vec<Option<Vector2<f64>>>],
+    skeleton: &Skeleton,
+    root: &[Vector3<f64>],
+    times: &[f64],
+    opts: &ArticulatedOptions,
+) -> Result<SkeletonReconstruction> {
+    let f = cameras.len();
+    let nj = skeleton.n_joints();
+    if pixels.len() != f || root.len() != f {
+        return Err(Error::invalid(
+            "x/root",
+            format!("need one entry per camera frame ({f})"),
+        ));
+    }
+    if let Some(i) = pixels.iter().position(|row| row.len() != nj) {
+        return Err(Error::invalid(
+            "x",
+            format!("frame {i}: expected {nj} joints, got {}", pixels[i].len()),
+        ));
+    }
+    let mut traj: Vec<Option<Vec<Vector3<f64>>>> = vec![None; nj];
+    let mut results: Vec<Option<ArticulatedResult>> = vec![None; nj];
+    traj[skeleton.root()] = Some(root.to_vec());
+    for &j in &skeleton.order()[1..] {
+        let p = skeleton.parents()[j].ok_or_else(|| Error::invalid("parents", "bad order"))?;
+        let parent = traj[p]
+            .clone()
+            .ok_or_else(|| Error::invalid("parents", "parent not reconstructed"))?;
+        let px: Vec<Option<Vector2<f64>>> = pixels.iter().map(|row| row[j]).collect();
+        let res =
+            reconstruct_articulated(cameras, &px, &parent, times, skeleton.lengths()[j], opts)
+                .map_err(|e| match e {
+                    Error::Degenerate(m) => Error::Degenerate(format!("joint {j}: {m}")),
+                    other => other,
+                })?;
+        traj[j] = Some(res.points.clone());
+        results[j] = Some(res);
+    }
+    let mut out = vec![vec![Vector3::zeros(); nj]; f];
+    for (j, t) in traj.iter().enumerate() {
+        if let Some(t) = t {
+            for i in 0..f {
+                out[i][j] = t[i];
+            }
+        }
+    }
+    Ok((out, results))
+}

@@ -1,0 +1,276 @@
+use super::*;
+use rand::{Rng, SeedableRng};
+use rand_chacha::ChaCha8Rng;
+
+struct Scene {
+    cameras: Vec<Camera>,
+    parent: Vec<Vector3<f64>>,
+    child: Vec<Vector3<f64>>,
+    pixels: Vec<Option<Vector2<f64>>>,
+    times: Vec<f64>,
+    length: f64,
+}
+
+/// A stationary camera 4 m away, a moving parent, a child at `length` whose angles are
+/// smooth (low-frequency DCT) functions of time, pixel noise `noise` (pixels).
+fn scene(f: usize, length: f64, noise: f64, seed: u64) -> Scene {
+    let mut rng = ChaCha8Rng::seed_from_u64(seed);
+    let k = Matrix3::new(800.0, 0.0, 320.0, 0.0, 800.0, 240.0, 0.0, 0.0, 1.0);
+    let cam = Camera::new(k, Matrix3::identity(), Vector3::new(0.0, 0.0, -4.0), 0).expect("cam");
+    let times: Vec<f64> = (0..f).map(|i| i as f64 / 30.0).collect();
+    let span = DctSpan::from_times(&times).expect("span");
+    let basis = span.matrix(&times, 5).expect("basis");
+    let scale = (f as f64).sqrt();
+    let ct = DVector::from_fn(5, |j, _| {
+        if j == 0 {
+            1.4 * scale
+        } else {
+            rng.random_range(-0.6..0.6)
+        }
+    });
+    let cp = DVector::from_fn(5, |j, _| {
+        if j == 0 {
+            0.5 * scale
+        } else {
+            rng.random_range(-1.2..1.2)
+        }
+    });
+    let th = &basis * ct;
+    let ph = &basis * cp;
+    let mut parent = Vec::new();
+    let mut child = Vec::new();
+    let mut pixels = Vec::new();
+    for i in 0..f {
+        let t = times[i];
+        let p = Vector3::new(0.4 * (1.3 * t).sin(), 0.2 * t - 0.2, 0.3 * (0.9 * t).cos());
+        let d = Vector3::new(
+            th[i].sin() * ph[i].cos(),
+            th[i].sin() * ph[i].sin(),
+            th[i].cos(),
+        );
+        let c = p + d * length;
+        let (u, _) = cam.project(&c);
+        let nz = Vector2::new(rng.random_range(-1.0..1.0), rng.random_range(-1.0..1.0)) * noise;
+        parent.push(p);
+        child.push(c);
+        pixels.push(Some(u + nz));
+    }
+    Scene {
+        cameras: vec![cam; f],
+        parent,
+        child,
+        pixels,
+        times,
+        length,
+    }
+}
+
+fn rel_error(est: &[Vector3<f64>], s: &Scene) -> f64 {
+    let num: f64 = est
+        .iter()
+        .zip(&s.child)
+        .map(|(a, b)| (a - b).norm_squared())
+        .sum();
+    let den: f64 = s
+        .child
+        .iter()
+        .zip(&s.parent)
+        .map(|(c, p)| (c - p).norm_squared())
+        .sum();
+    (num / den).sqrt()
+}
+
+fn opts(k: usize) -> ArticulatedOptions {
+    ArticulatedOptions {
+        k,
+        ..ArticulatedOptions::default()
+    }
+}
+
+#[test]
+fn recovers_smooth_articulated_trajectory() {
+    // Sec 4.3: the truth wins when η_a > 1, the impostor when η_a < 1.
+    let (mut good, mut bad) = (0, 0);
+    for seed in 0..10 {
+        let s = scene(60, 0.4, 0.0, seed);
+        let eta = reconstructability(&s.cameras, &s.parent, &s.child, &s.times, 8).expect("eta");
+        let r = reconstruct_articulated(
+            &s.cameras,
+            &s.pixels,
+            &s.parent,
+            &s.times,
+            s.length,
+            &opts(8),
+        )
+        .expect("reconstructs");
+        let e = rel_error(&r.points, &s);
+        assert!(r.bqp.optimal);
+        if eta > 1.1 {
+            good += 1;
+            assert!(e < 0.02, "seed {seed}: relative error {e}, eta {eta}");
+        } else if eta < 0.95 {
+            bad += 1;
+            assert!(e > 0.3, "seed {seed}: relative error {e}, eta {eta}");
+        }
+        assert!(r.reprojection_rms < 0.5, "rms {}", r.reprojection_rms);
+        for (p, q) in r.points.iter().zip(&s.parent) {
+            assert!(((p - q).norm() - r.radius).abs() < 1e-9);
+        }
+    }
+    assert!(good >= 3 && bad >= 2, "good {good}, bad {bad}");
+}
+
+#[test]
+fn noise_and_missing_frames_are_imputed() {
+    let mut s = scene(60, 0.4, 0.3, 4);
+    let eta = reconstructability(&s.cameras, &s.parent, &s.child, &s.times, 8).expect("eta");
+    assert!(eta > 2.0, "eta {eta}");
+    let mut rng = ChaCha8Rng::seed_from_u64(5);
+    let mut missing = Vec::new();
+    for i in 0..60 {
+        if rng.random_range(0.0..1.0) < 0.1 {
+            s.pixels[i] = None;
+            missing.push(i);
+        }
+    }
+    assert!(!missing.is_empty());
+    let r = reconstruct_articulated(
+        &s.cameras,
+        &s.pixels,
+        &s.parent,
+        &s.times,
+        s.length,
+        &opts(8),
+    )
+    .expect("reconstructs");
+    let e = rel_error(&r.points, &s);
+    assert!(e < 0.1, "relative error {e}");
+    let worst_missing = missing
+        .iter()
+        .map(|&i| (r.points[i] - s.child[i]).norm())
+        .fold(0.0, f64::max);
+    assert!(
+        worst_missing < 0.15 * s.length,
+        "imputed error {worst_missing}"
+    );
+    assert_eq!(r.n_observed, 60 - missing.len());
+}
+
+#[test]
+fn small_radius_is_enlarged() {
+    let s = scene(60, 0.4, 0.0, 4);
+    let r = reconstruct_articulated(
+        &s.cameras,
+        &s.pixels,
+        &s.parent,
+        &s.times,
+        0.01 * s.length,
+        &opts(8),
+    )
+    .expect("reconstructs");
+    assert!(
+        r.radius > 0.9 * s.length && r.radius <= s.length * (1.0 + 1e-9),
+        "radius {}",
+        r.radius
+    );
+    assert!(rel_error(&r.points, &s) < 0.15);
+}
+
+#[test]
+fn fitted_radius_shrinks_an_overestimated_length() {
+    let s = scene(60, 0.4, 0.0, 4);
+    let mut o = opts(8);
+    o.fit_radius = true;
+    let r = reconstruct_articulated(
+        &s.cameras,
+        &s.pixels,
+        &s.parent,
+        &s.times,
+        2.0 * s.length,
+        &o,
+    )
+    .expect("reconstructs");
+    assert!(
+        (r.radius / s.length - 1.0).abs() < 0.02,
+        "radius {}",
+        r.radius
+    );
+    assert!(rel_error(&r.points, &s) < 0.05);
+}
+
+#[test]
+fn unwrap_keeps_angles_continuous() {
+    let raw = [
+        (0.3, 3.1),
+        (0.3, -3.1),
+        (0.1, 0.0),
+        (0.05, 0.0),
+        (0.05, PI),
+        (0.1, PI),
+    ];
+    let u = unwrap_angles(&raw);
+    for w in u.windows(2) {
+        assert!(
+            (w[1].0 - w[0].0).abs() < 1.0 && (w[1].1 - w[0].1).abs() < 0.2,
+            "{u:?}"
+        );
+    }
+    let frame = Matrix3::identity();
+    for (a, b) in raw.iter().zip(&u) {
+        assert!((from_angles(&frame, a.0, a.1) - from_angles(&frame, b.0, b.1)).norm() < 1e-12);
+    }
+}
+
+#[test]
+fn bad_input() {
+    let s = scene(20, 0.4, 0.0, 0);
+    for len in [0.0, -1.0, f64::NAN] {
+        let e = reconstruct_articulated(&s.cameras, &s.pixels, &s.parent, &s.times, len, &opts(4));
+        assert!(matches!(e, Err(Error::InvalidInput { ref arg, .. }) if arg == "length"));
+    }
+    let e = reconstruct_articulated(&s.cameras, &s.pixels, &s.parent, &s.times, 0.4, &opts(30));
+    assert!(matches!(e, Err(Error::Degenerate(_))));
+    assert!(Skeleton::new(vec![None, Some(0), Some(1)], vec![0.0, 1.0, 1.0]).is_ok());
+    // Two roots, cycle, out of range, non-positive bone, self-parent.
+    assert!(Skeleton::new(vec![None, None], vec![0.0, 1.0]).is_err());
+    assert!(Skeleton::new(vec![None, Some(2), Some(1)], vec![0.0, 1.0, 1.0]).is_err());
+    assert!(Skeleton::new(vec![None, Some(5)], vec![0.0, 1.0]).is_err());
+    assert!(Skeleton::new(vec![None, Some(0)], vec![0.0, -1.0]).is_err());
+    assert!(Skeleton::new(vec![Some(0)], vec![1.0]).is_err());
+}
+
+#[test]
+fn skeleton_chain_recursive() {
+    // root → a → b, both bones following smooth motions.
+    let s1 = scene(60, 0.4, 0.0, 4);
+    let s2 = scene(60, 0.3, 0.0, 5);
+    let root = s1.parent.clone();
+    let a = s1.child.clone();
+    let b: Vec<Vector3<f64>> = a
+        .iter()
+        .zip(s2.child.iter().zip(&s2.parent))
+        .map(|(x, (c, p))| x + (c - p))
+        .collect();
+    let cam = s1.cameras[0];
+    let pixels: Vec<Vec<Option<Vector2<f64>>>> = (0..60)
+        .map(|i| {
+            vec![
+                Some(cam.project(&root[i]).0),
+                Some(cam.project(&a[i]).0),
+                Some(cam.project(&b[i]).0),
+            ]
+        })
+        .collect();
+    let sk = Skeleton::new(vec![None, Some(0), Some(1)], vec![0.0, 0.4, 0.3]).expect("tree");
+    let (pos, res) =
+        reconstruct_skeleton(&s1.cameras, &pixels, &sk, &root, &s1.times, &opts(8)).expect("ok");
+    assert!(res[0].is_none() && res[1].is_some() && res[2].is_some());
+    let eta_b = reconstructability(&s1.cameras, &a, &b, &s1.times, 8).expect("eta");
+    assert!(eta_b > 1.1, "eta_b {eta_b}");
+    let err_b = pos
+        .iter()
+        .zip(&b)
+        .map(|(p, t)| (p[2] - t).norm())
+        .fold(0.0, f64::max);
+    assert!(err_b < 0.05, "joint b error {err_b}");
+}

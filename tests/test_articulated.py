@@ -1,0 +1,242 @@
+"""Chapter 4: exact BQP and articulated reconstruction on real CMU motion capture."""
+
+from __future__ import annotations
+
+import itertools
+from pathlib import Path
+
+import numpy as np
+import pytest
+import socialcam as sc
+from socialcam.mocap import load_bvh
+from socialcam.synth.cameras import look_at
+
+DATA = Path(__file__).parent / "data"
+
+
+# ----------------------------------------------------------------------------- BQP
+def _enumerate(Q: np.ndarray, c: np.ndarray) -> float:
+    n = len(c)
+    B = np.array(list(itertools.product([0.0, 1.0], repeat=n)))
+    return float(np.min(np.einsum("ki,ij,kj->k", B, Q, B) + B @ c))
+
+
+@pytest.mark.parametrize("seed", range(6))
+def test_solve_bqp_matches_enumeration(seed: int) -> None:
+    rng = np.random.default_rng(seed)
+    n = 8 + seed
+    if seed % 2:
+        A = rng.normal(size=(n + 2, n))
+        Q = A.T @ A  # positive semidefinite
+    else:
+        A = rng.normal(scale=5, size=(n, n))
+        Q = (A + A.T) / 2  # indefinite
+    c = rng.normal(scale=3, size=n)
+    r = sc.solve_bqp(Q, c)
+    want = _enumerate(Q, c)
+    assert r.optimal and r.gap == 0.0
+    assert r.objective == pytest.approx(want, abs=1e-8)
+    b = r.x.astype(float)
+    assert b @ Q @ b + c @ b == pytest.approx(r.objective, abs=1e-9)
+    assert r.to_dict()["nodes"] == r.nodes
+
+
+def _read_qubo(path: Path) -> np.ndarray:
+    lines = path.read_text().split("\n")
+    n = int(lines[0])
+    S = np.zeros((n, n))
+    for ln in lines[1:]:
+        if ln.strip():
+            i, j, v = ln.split()
+            S[int(i), int(j)] = S[int(j), int(i)] = float(v)
+    return S
+
+
+def test_or_library_instance_to_known_optimum() -> None:
+    optima = {
+        ln.split(",")[0]: float(ln.split(",")[3])
+        for ln in (DATA / "bqp" / "optima_bqp50.csv").read_text().splitlines()[1:]
+    }
+    r = sc.solve_bqp(_read_qubo(DATA / "bqp" / "bqp50-9.qubo"))
+    assert r.optimal
+    assert r.objective == optima["bqp50-9"]
+
+
+def test_limits_return_incumbent_and_gap() -> None:
+    S = _read_qubo(DATA / "bqp" / "bqp50-1.qubo")
+    r = sc.solve_bqp(S, node_limit=3)
+    assert not r.optimal and r.nodes == 3
+    assert r.bound <= -2098 <= r.objective
+    assert r.gap >= 0
+
+
+def test_bqp_bad_input() -> None:
+    with pytest.raises(ValueError, match="symmetric"):
+        sc.solve_bqp(np.array([[1.0, 2.0], [0.0, 1.0]]))
+    with pytest.raises(ValueError, match="Q"):
+        sc.solve_bqp(np.array([[1.0, np.nan], [np.nan, 1.0]]))
+    with pytest.raises(ValueError, match="c"):
+        sc.solve_bqp(np.eye(2), np.ones(3))
+    with pytest.raises(ValueError, match="time_limit"):
+        sc.solve_bqp(np.eye(2), time_limit=-1.0)
+
+
+# ----------------------------------------------------------- articulated, real mocap
+class Scene:
+    """CMU subject 131 walking (real motion), 60 frames at 60 Hz, seen by one camera per
+    frame that orbits the subject at 1.5 m (a synthetic camera, as in the thesis)."""
+
+    def __init__(self) -> None:
+        m = load_bvh(DATA / "mocap" / "cmu_131_01_walk300.bvh")
+        self.skeleton, keep = sc.Skeleton.from_bvh(m)
+        P = m.positions[::2][:60][:, keep]
+        F = P.shape[0]
+        d = P[-1, 0] - P[0, 0]
+        d[1] = 0
+        d /= np.linalg.norm(d)
+        side = np.cross(d, [0.0, 1.0, 0.0])
+        ang = np.linspace(-0.5, 0.5, F)
+        C = P[:, 0] + 1.5 * (np.cos(ang)[:, None] * side + np.sin(ang)[:, None] * d)
+        C += [0.0, 0.3, 0.0]
+        K = np.array([[1000.0, 0, 640], [0, 1000.0, 360], [0, 0, 1]])
+        self.cams = sc.Cameras(K, look_at(C, P[:, 0], up=(0.0, 1.0, 0.0)), C, np.arange(F) / 60)
+        self.P = P
+        self.px = np.stack(
+            [
+                sc._core.project(K[None], self.cams.R[i : i + 1], C[i : i + 1], P[i])[0][0]
+                for i in range(F)
+            ]
+        )
+        self.k = 8
+        self.eta = {
+            j: sc.articulated_reconstructability(
+                self.cams, P[:, self.skeleton.parents[j]], P[:, j], self.k
+            )
+            for j in range(1, len(self.skeleton.names))
+        }
+
+    def rel_error(self, est: np.ndarray, j: int) -> float:
+        """‖ΔX − ΔX̂‖ / ‖ΔX‖ on the bone vector (stricter than on world positions)."""
+        par = self.P[:, self.skeleton.parents[j]]
+        return float(np.linalg.norm(est - self.P[:, j]) / np.linalg.norm(self.P[:, j] - par))
+
+
+@pytest.fixture(scope="module")
+def scene() -> Scene:
+    return Scene()
+
+
+def _smooth_offset(F: int, magnitude: float, rng: np.random.Generator) -> np.ndarray:
+    t = np.linspace(0, 1, F)[:, None]
+    a, b = rng.normal(size=(2, 3))
+    off = a + np.sin(2 * np.pi * t) * b
+    return off * magnitude / np.linalg.norm(off, axis=1).mean()
+
+
+def _run(
+    scene: Scene, j: int, *, noise=0.5, root_ratio=0.0, scale=1.0, missing=0.0, seed=0, fit=False
+):
+    rng = np.random.default_rng(seed + 17 * j)
+    p = scene.skeleton.parents[j]
+    r = scene.skeleton.lengths[j]
+    F = scene.P.shape[0]
+    x = scene.px[:, j] + rng.normal(0, noise, (F, 2))
+    x[rng.random(F) < missing] = np.nan
+    parent = scene.P[:, p] + _smooth_offset(F, root_ratio * r, rng)
+    out = sc.reconstruct_articulated(x, scene.cams, parent, r * scale, scene.k, fit_radius=fit)
+    return out, scene.rel_error(out.X, j)
+
+
+def test_error_is_low_when_reconstructability_is_high(scene: Scene) -> None:
+    # Fig 4.2(c): η_a ≫ 1 → the truth; η_a < 1 → the (smoother) impostor.
+    errs = {j: _run(scene, j)[1] for j in scene.eta}
+    high = [errs[j] for j, e in scene.eta.items() if e > 1.25]
+    low = [errs[j] for j, e in scene.eta.items() if e < 0.95]
+    assert len(high) >= 4 and len(low) >= 3
+    assert np.median(high) < 0.06, (high, low)
+    assert np.median(low) > 0.3, (high, low)
+
+
+def _good(scene: Scene) -> list[int]:
+    return [j for j, e in scene.eta.items() if e > 1.25]
+
+
+def test_error_grows_with_root_error(scene: Scene) -> None:
+    # Fig 4.3(a): the error grows with the ratio of root error to bone length. (Our
+    # shoulders already flip to the impostor at a ratio of 0.05, so we compare medians.)
+    good = _good(scene)
+    med = {
+        ratio: np.median([_run(scene, j, root_ratio=ratio)[1] for j in good])
+        for ratio in (0.0, 0.1, 0.5)
+    }
+    assert med[0.0] < 0.06, med
+    assert med[0.0] < med[0.1] < med[0.5], med
+    assert med[0.5] > 0.3, med
+
+
+def test_robust_to_small_radius_scale(scene: Scene) -> None:
+    # Fig 4.3(b): radius scales 1e-2 … 1e0 reconstruct reliably (the sphere is enlarged to
+    # meet every ray); a scale of 3 is unreliable (every ray meets the too-large sphere).
+    good = _good(scene)
+    med = {s: np.median([_run(scene, j, scale=s)[1] for j in good]) for s in (0.01, 0.1, 1.0, 3.0)}
+    for s in (0.01, 0.1, 1.0):
+        assert med[s] < 0.06, med
+    assert med[3.0] > 1.0, med
+
+
+def test_five_percent_missing_data(scene: Scene) -> None:
+    # Fig 4.3(c): 5% missing, 0.5 px noise, length under-estimated by 5% (thesis: 13% mean
+    # relative error, also with root error). An over-estimated length or root error flips
+    # some joints to the impostor here (see the two tests above).
+    good = _good(scene)
+    errs = [_run(scene, j, scale=0.95, missing=0.05)[1] for j in good]
+    assert np.median(errs) < 0.06, errs
+    out, _ = _run(scene, good[0], missing=0.05)
+    assert out.X.shape == (60, 3) and np.isfinite(out.X).all()
+
+
+def test_fitted_radius_under_thesis_conditions(scene: Scene) -> None:
+    # The thesis' Fig 4.3(c) conditions: 5% missing, 1 px noise, 5% root error and a 5%
+    # length error. Only enlarging the sphere (the thesis) flips joints to the impostor;
+    # fitting the radius to the rays keeps most of them (mean reported by the bench note).
+    good = _good(scene)
+    kw = {"noise": 1.0, "root_ratio": 0.05, "scale": 1.05, "missing": 0.05}
+    fitted = [_run(scene, j, fit=True, **kw)[1] for j in good]
+    thesis = [_run(scene, j, **kw)[1] for j in good]
+    assert np.median(fitted) < 0.1, fitted
+    assert np.mean(fitted) < np.mean(thesis), (fitted, thesis)
+    # Fitting ignores an over-estimated length entirely.
+    out, e = _run(scene, good[0], scale=3.0, fit=True)
+    assert e < 0.06 and out.radius < 1.02 * scene.skeleton.lengths[good[0]]
+
+
+def test_skeleton_recursive_and_presets(scene: Scene) -> None:
+    sk = scene.skeleton
+    res = sc.reconstruct_skeleton(scene.px, scene.cams, sk, scene.P[:, 0], k=8)
+    assert res.X.shape == scene.P.shape
+    assert res.joints[sk.root] is None
+    np.testing.assert_allclose(res.X[:, sk.root], scene.P[:, 0])
+    # A joint whose chain from the root is reconstructable is recovered.
+    j = sk.index("LeftHip")
+    assert scene.rel_error(res.X[:, j], j) < 0.06
+    human = sc.Skeleton.cmu_human(1.8)
+    assert human.names[human.root] == "Hips" and len(human.names) == 19
+    assert human.lengths[human.index("LeftKnee")] == pytest.approx(0.245 * 1.8)
+
+
+def test_articulated_bad_input(scene: Scene) -> None:
+    x = scene.px[:, 1]
+    par = scene.P[:, 0]
+    for r in (0.0, -1.0):
+        with pytest.raises(ValueError, match="length"):
+            sc.reconstruct_articulated(x, scene.cams, par, r, 8)
+    with pytest.raises(sc.DegenerateError):
+        sc.reconstruct_articulated(x, scene.cams, par, 0.1, 100)
+    with pytest.raises(ValueError, match="root"):
+        sc.Skeleton(["a", "b"], [-1, -1], [0.0, 1.0])
+    with pytest.raises(ValueError, match="cycle"):
+        sc.Skeleton(["a", "b", "c"], [-1, 2, 1], [0.0, 1.0, 1.0])
+    with pytest.raises(ValueError, match="range"):
+        sc.Skeleton(["a", "b"], [-1, 7], [0.0, 1.0])
+    with pytest.raises(ValueError, match="positive"):
+        sc.Skeleton(["a", "b"], [-1, 0], [0.0, 0.0])
