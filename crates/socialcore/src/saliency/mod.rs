@@ -52,6 +52,10 @@ pub struct GazeRays {
     v: Vec<Vector3<f64>>,
     h: Vec<f64>,
     ids: Vec<i64>,
+    /// Per-ray constants of the hot loops: `1/h²`, `1/h³` and `1/(h√2π)`.
+    inv_h2: Vec<f64>,
+    inv_h3: Vec<f64>,
+    peak: Vec<f64>,
 }
 
 impl GazeRays {
@@ -117,7 +121,18 @@ impl GazeRays {
             }
             None => (0..n as i64).collect(),
         };
-        Ok(GazeRays { p, v, h, ids })
+        let inv_h2 = h.iter().map(|h| 1.0 / (h * h)).collect();
+        let inv_h3 = h.iter().map(|h| 1.0 / (h * h * h)).collect();
+        let peak = h.iter().map(|h| field::INV_SQRT_2PI / h).collect();
+        Ok(GazeRays {
+            p,
+            v,
+            h,
+            ids,
+            inv_h2,
+            inv_h3,
+            peak,
+        })
     }
 
     /// Builds rays from flat row-major `(N, 3)` buffers, as they come from NumPy.

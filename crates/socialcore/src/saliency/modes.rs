@@ -20,8 +20,9 @@ pub struct ModeOptions {
     pub depth_max: f64,
     /// A seed has converged when an iteration moves it less than `tol` metres.
     pub tol: f64,
-    /// Accelerate Eq 6.7 with Newton steps inside a mode's basin (see `climb`); `false`
-    /// runs the plain update of Eq 6.7 (slow along elongated modes).
+    /// Accelerate Eq 6.7 with Newton steps inside a mode's basin and over-relaxed steps
+    /// elsewhere (see `climb`); `false` runs the plain update of Eq 6.7 (slow along
+    /// elongated modes and along the rays' ridges).
     pub newton: bool,
     /// Iteration cap per seed; seeds that reach it (slow drift along a lone ray's ridge)
     /// are dropped.
@@ -200,7 +201,7 @@ fn shift_terms(rays: &GazeRays, x: &Vector3<f64>) -> ShiftTerms {
         den: 0.0,
     };
     for i in 0..rays.len() {
-        let (p, v, h) = (&rays.p[i], &rays.v[i], rays.h[i]);
+        let (p, v) = (&rays.p[i], &rays.v[i]);
         let w = x - p;
         let s = w.dot(v);
         if s < 0.0 {
@@ -210,21 +211,25 @@ fn shift_terms(rays: &GazeRays, x: &Vector3<f64>) -> ShiftTerms {
         let pp = perp.norm_squared();
         if s < MIN_DEPTH {
             if pp == 0.0 {
-                t.field_sum += INV_SQRT_2PI / h;
+                t.field_sum += rays.peak[i];
             }
             continue;
         }
-        let q = pp / (s * s * h * h);
-        if q > Q_CUTOFF {
+        // q = ‖d/h‖² = pp/(s²h²); the cutoff test needs no division.
+        let pp_h = pp * rays.inv_h2[i];
+        let s2 = s * s;
+        if pp_h > Q_CUTOFF * s2 {
             continue;
         }
-        let e = (-0.5 * q).exp();
-        t.field_sum += e * INV_SQRT_2PI / h;
-        let wi = e / (h * h * h * s * s);
-        let x_tilde = x - perp + v * (pp / s);
-        t.num += x_tilde * wi;
+        let inv_s2 = 1.0 / s2;
+        let e = (-0.5 * pp_h * inv_s2).exp();
+        t.field_sum += e * rays.peak[i];
+        let wi = e * rays.inv_h3[i] * inv_s2;
+        // x̃ − x = −(x − x̂) + (‖x − x̂‖²/s) v; Σ wᵢ x̃ᵢ is formed as x Σ wᵢ + Σ wᵢ (x̃ᵢ − x).
+        t.num += (v * (pp * s * inv_s2) - perp) * wi;
         t.den += wi;
     }
+    t.num += x * t.den;
     t
 }
 
@@ -234,6 +239,12 @@ struct Climb {
     value: f64,
     converged: bool,
 }
+
+/// Largest over-relaxation factor of an accelerated climb.
+const MAX_ALPHA: f64 = 1024.0;
+
+/// A climb that wanders farther than this many `depth_max` from its seed is abandoned.
+const ESCAPE_FACTOR: f64 = 2.0;
 
 /// Relative field gain per iteration below which a climb counts as converged.
 const STALL_GAIN: f64 = 1e-10;
@@ -298,14 +309,17 @@ fn full_terms(rays: &GazeRays, x: &Vector3<f64>) -> FullTerms {
     t
 }
 
-/// Climbs from `x0` with the mean-shift update of Eq 6.7, accelerated near a mode.
+/// Climbs from `x0` with the mean-shift update of Eq 6.7.
 ///
-/// Eq 6.7 converges only linearly, and very slowly along the long axis of the elongated
-/// modes that nearly parallel rays make. So each iteration first tries the Newton step
-/// `−(∇²f)⁻¹∇f` where the Hessian is negative definite (inside the mode's basin), and
-/// takes it if it raises the field; otherwise it takes the Eq 6.7 step, halved until it
-/// does not lower the field (the ray kernel is not a classic mean-shift kernel, so ascent
-/// is not guaranteed by theory). If no halving helps, `x` is a numerical maximum.
+/// Eq 6.7 converges only linearly: very slowly along the long axis of the elongated
+/// modes that nearly parallel rays make, and along a ray's own ridge near the eye, where
+/// its weight `1/s²` dominates. With `opts.newton` each iteration first tries the Newton
+/// step `−(∇²f)⁻¹∇f` where the Hessian is negative definite (inside a mode's basin) and
+/// takes it if it raises the field; otherwise it tries an over-relaxed Eq 6.7 step
+/// (factor doubling after each success). The fallback is always the Eq 6.7 step, halved
+/// until it does not lower the field (the ray kernel is not a classic mean-shift kernel,
+/// so ascent is not guaranteed by theory). If no halving helps, `x` is a numerical
+/// maximum. Without `opts.newton` this is the plain Eq 6.7 iteration with that safeguard.
 fn climb(rays: &GazeRays, x0: Vector3<f64>, opts: &ModeOptions) -> Climb {
     let n = rays.len() as f64;
     let eval = |x: &Vector3<f64>| {
@@ -321,6 +335,7 @@ fn climb(rays: &GazeRays, x0: Vector3<f64>, opts: &ModeOptions) -> Climb {
     };
     let mut x = x0;
     let mut terms = eval(&x);
+    let mut alpha = 1.0f64;
     for _ in 0..opts.max_iter {
         let here = &terms.shift;
         if here.den <= 0.0 {
@@ -344,16 +359,37 @@ fn climb(rays: &GazeRays, x0: Vector3<f64>, opts: &ModeOptions) -> Climb {
             }
         }
         if next.is_none() {
-            let mut step = here.num / here.den - x;
-            for _ in 0..MAX_HALVINGS {
-                let xn = x + step;
+            let base = here.num / here.den - x;
+            // Over-relaxation (accelerated climbs only): try `alpha` times the Eq 6.7
+            // step, doubling `alpha` after each success, so a seed crawling along a ray's
+            // ridge (its own ray's weight 1/s² dominates the update) speeds up
+            // geometrically; on failure `alpha` falls back to 1 and then halves.
+            if opts.newton && alpha > 1.0 {
+                let xn = x + base * alpha;
                 let tn = eval(&xn);
-                if tn.shift.field_sum >= here.field_sum * (1.0 - 1e-12) {
-                    moved = step.norm();
+                if tn.shift.field_sum > here.field_sum {
+                    moved = base.norm() * alpha;
                     next = Some((xn, tn));
-                    break;
+                    alpha = (alpha * 2.0).min(MAX_ALPHA);
+                } else {
+                    alpha = 1.0;
                 }
-                step *= 0.5;
+            }
+            if next.is_none() {
+                let mut step = base;
+                for k in 0..MAX_HALVINGS {
+                    let xn = x + step;
+                    let tn = eval(&xn);
+                    if tn.shift.field_sum >= here.field_sum * (1.0 - 1e-12) {
+                        moved = step.norm();
+                        next = Some((xn, tn));
+                        if k == 0 && opts.newton {
+                            alpha = 2.0;
+                        }
+                        break;
+                    }
+                    step *= 0.5;
+                }
             }
         }
         let Some((xn, tn)) = next else {
@@ -370,6 +406,14 @@ fn climb(rays: &GazeRays, x0: Vector3<f64>, opts: &ModeOptions) -> Climb {
         let stalled = gain <= STALL_GAIN * here.field_sum;
         x = xn;
         terms = tn;
+        if (x - x0).norm() > ESCAPE_FACTOR * opts.depth_max {
+            // Nearly parallel rays overlap for ever: the field creeps up towards infinity.
+            return Climb {
+                x,
+                value: terms.shift.field_sum / n,
+                converged: false,
+            };
+        }
         if moved < opts.tol || stalled {
             return Climb {
                 x,
