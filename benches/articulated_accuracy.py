@@ -12,6 +12,7 @@ from __future__ import annotations
 from pathlib import Path
 
 import numpy as np
+
 import socialcam as sc
 from socialcam.mocap import load_bvh
 from socialcam.synth.cameras import look_at

@@ -14,6 +14,7 @@ import time
 from pathlib import Path
 
 import numpy as np
+
 import socialcam as sc
 from socialcam.mocap import load_bvh
 from socialcam.synth.cameras import look_at

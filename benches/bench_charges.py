@@ -19,6 +19,7 @@ import sys
 import time
 
 import numpy as np
+
 import socialcam as sc
 from socialcam import synth
 

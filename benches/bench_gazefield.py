@@ -13,6 +13,7 @@ import argparse
 import time
 
 import numpy as np
+
 from socialcam import _core
 from socialcam.synth.people import primary_from_true
 

@@ -7,6 +7,7 @@ from pathlib import Path
 
 import numpy as np
 import pytest
+
 import socialcam as sc
 from socialcam.mocap import load_bvh
 from socialcam.synth.cameras import look_at

@@ -5,6 +5,7 @@ from __future__ import annotations
 
 import numpy as np
 import pytest
+
 import socialcam as sc
 from socialcam import synth
 from socialcam.charges import grid_axes

@@ -5,6 +5,7 @@ from __future__ import annotations
 
 import numpy as np
 import pytest
+
 import socialcam
 from socialcam import synth
 from socialcam.gazefield import GazeField, cross_validate_gaze, detect_anomalies, fuse_gaze

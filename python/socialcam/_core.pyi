@@ -88,6 +88,7 @@ def reconstructability(points: _F64, centres: _F64, k: int, times: _F64 | None =
 
 def null_residual(trajectory: _F64, k: int, times: _F64 | None = None) -> float:
     """``‖Θ^⊥ β^⊥‖`` of a trajectory ``(F,3)`` with ``k`` DCT functions."""
+
 # --- social saliency and social charges (issue 5, thesis Chapter 6) ---
 
 def saliency_field(p: _F64, v: _F64, h: _F64, points: _F64) -> _F64:
@@ -150,6 +151,7 @@ def track_charges(
 ) -> tuple[npt.NDArray[np.int64], _F64]:
     """Mean-shift tracking of membership features ``(n,J)`` → track ids ``(n,)`` (−1 =
     dropped duplicate) and centres ``(K,J)`` (Sec 6.1.3)."""
+
 # ---- issue 6: gaze field (thesis Chapter 7). Rays flat: p (N,3), v (N,3), members (N,)
 # dense int64 in 0..J, offsets (F+1,) int64; windows (W,3) int64 [start, end, n_charges];
 # a field as positions (F,I,3) NaN-padded, magnitudes (F,I), kappa (F,) (NaN = no field).
@@ -228,6 +230,7 @@ def gaze_angle_to_charges(
     self_radius: float,
 ) -> _F64:
     """Radians from ``v`` to the closest charge direction ``(M,)``; NaN where none."""
+
 # --- binary quadratic programming and articulated motion (Chapter 4) ---
 
 def solve_bqp(
