@@ -5,7 +5,6 @@ from __future__ import annotations
 
 import numpy as np
 import pytest
-
 import socialcam as sc
 from socialcam import synth
 from socialcam.charges import grid_axes
@@ -111,7 +110,7 @@ def test_exact_rays_meet_at_their_target():
     assert c.members.tolist() == [10, 11, 12, 13, 14]
     assert c.magnitude == pytest.approx(1 / (0.1 * np.sqrt(2 * np.pi)), rel=1e-6)
     assert np.isclose(np.linalg.norm(c.membership), 1.0)
-    assert c.in_region(t) and not c.in_region(t + [0, 0, 1.0])
+    assert c.in_region(t) and not c.in_region(t + np.array([0, 0, 1.0]))
     # The ellipsoid's ends lie where the field is 80 % of the peak.
     ends = c.region_centre + (c.region_axes * c.region_radii).T
     assert np.allclose(sc.saliency_field(r, ends) / c.magnitude, 0.8, atol=0.05)
@@ -200,3 +199,38 @@ def test_scene_charge_counts_and_tracks(name):
         covered = np.isin(group_frames, tr[0].frames).mean()
         print(f"{name}: target {t} track {tr[0].id} covers {covered:.3f} of its frames")
         assert covered >= 0.9
+
+
+def test_tracks_survive_dissolution_and_reemergence():
+    """Fig 6.3b: group A dissolves (its members look around) and re-forms; its charge
+    gets its old track id back, while group B's track continues."""
+    scene = synth.meeting(90, seed=5)
+    group = scene.group.copy()
+    group[30:60, :6] = -1  # group A dissolves for 3 s
+    people = synth.looking_at(scene.eyes, scene.targets, group, h=scene.noise, seed=3)
+    frames = [sc.GazeRays(people.eyes[f], people.gaze[f], scene.h) for f in range(90)]
+    charges = sc.find_charges_sequence(frames, seed=0, bounds=tuple(scene.room))
+    tracks = sc.track_charges(charges)
+    a = [t for t in tracks if t.core_members.tolist() == [0, 1, 2, 3, 4, 5]]
+    assert len(a) == 1
+    fa = a[0].frames
+    assert np.isin(np.r_[0:30, 60 + 10 : 90], fa).mean() >= 0.9  # before and after
+    assert not np.isin(np.r_[32:60], fa).any()  # not while dissolved
+
+
+def test_plots_return_figures():
+    import matplotlib
+
+    matplotlib.use("Agg")
+    scene = synth.meeting(20, seed=1)
+    rays = scene.rays(0)
+    charges = sc.find_charges(rays, bounds=tuple(scene.room))
+    fig = sc.plot_saliency(rays, scene.room[0], scene.room[1], shape=24, charges=charges,
+                           truth=scene.targets[0])  # fmt: skip
+    assert fig.axes and len(fig.axes[0].images) == 1
+    tracks = sc.track_charges(sc.find_charges_sequence(scene.ray_frames()))
+    fig2 = sc.plot_charge_tracks(tracks, times=scene.times, truth=scene.targets)
+    assert len(fig2.axes) == 4
+    import matplotlib.pyplot as plt
+
+    plt.close("all")

@@ -220,6 +220,7 @@ def _mode_kwargs(
     seeds_per_ray: int,
     depth_range: tuple[float, float],
     tol: float,
+    newton: bool,
     max_iter: int,
     merge_radius: float,
     member_sigma: float,
@@ -249,6 +250,7 @@ def _mode_kwargs(
         depth_min=float(depth_range[0]),
         depth_max=float(depth_range[1]),
         tol=float(tol),
+        newton=bool(newton),
         max_iter=int(max_iter),
         merge_radius=float(merge_radius),
         member_sigma=float(member_sigma),
@@ -305,7 +307,8 @@ def find_charges(
     seeds_per_ray: int = 20,
     depth_range: tuple[float, float] = (0.3, 10.0),
     tol: float = 1e-5,
-    max_iter: int = 500,
+    newton: bool = True,
+    max_iter: int = 100,
     merge_radius: float = 0.2,
     member_sigma: float = 2.5,
     min_members: int = 2,
@@ -320,7 +323,9 @@ def find_charges(
     Seeds are drawn along every ray (``seeds_per_ray`` stratified depths in
     ``depth_range`` metres, from ``seed``), each climbs the field with the update of
     Eq 6.7 until it moves less than ``tol`` metres (seeds still drifting after
-    ``max_iter`` iterations are dropped), modes closer than ``merge_radius`` are merged in
+    ``max_iter`` iterations are dropped; with ``newton`` (default) a Newton step on the
+    closed-form Hessian replaces the update wherever the Hessian is negative definite and
+    the step raises the field, which makes elongated modes converge fast), modes closer than ``merge_radius`` are merged in
     seed order, and a mode is kept if at least ``min_members`` rays pass within
     ``member_sigma`` bandwidths of it (Sec 6.2: "more than one gaze ray must contribute").
     With ``exclusive`` (default) a ray counts for the strongest charge only
@@ -335,7 +340,7 @@ def find_charges(
     """
     r = _rays(rays)
     kw = _mode_kwargs(
-        seeds_per_ray, depth_range, tol, max_iter, merge_radius, member_sigma, min_members,
+        seeds_per_ray, depth_range, tol, newton, max_iter, merge_radius, member_sigma, min_members,
         exclusive, min_magnitude, bounds, region_level, region_max_radius,
     )  # fmt: skip
     return _run([r], seed, kw)[0]
@@ -348,7 +353,8 @@ def find_charges_sequence(
     seeds_per_ray: int = 20,
     depth_range: tuple[float, float] = (0.3, 10.0),
     tol: float = 1e-5,
-    max_iter: int = 500,
+    newton: bool = True,
+    max_iter: int = 100,
     merge_radius: float = 0.2,
     member_sigma: float = 2.5,
     min_members: int = 2,
@@ -365,7 +371,7 @@ def find_charges_sequence(
     """
     fr = [_rays(f) for f in frames]
     kw = _mode_kwargs(
-        seeds_per_ray, depth_range, tol, max_iter, merge_radius, member_sigma, min_members,
+        seeds_per_ray, depth_range, tol, newton, max_iter, merge_radius, member_sigma, min_members,
         exclusive, min_magnitude, bounds, region_level, region_max_radius,
     )  # fmt: skip
     return _run(fr, seed, kw)
@@ -537,6 +543,10 @@ def plot_saliency(
     return fig  # type: ignore[return-value]
 
 
+def _cross2(a: FloatArray, b: FloatArray) -> float:
+    return float(a[0] * b[1] - a[1] * b[0])
+
+
 def _convex_hull(pts: FloatArray) -> FloatArray:
     """Monotone-chain convex hull of 2D points (for drawing projected ellipsoids)."""
     p = pts[np.lexsort((pts[:, 1], pts[:, 0]))]
@@ -544,7 +554,7 @@ def _convex_hull(pts: FloatArray) -> FloatArray:
     def half(seq: FloatArray) -> list[FloatArray]:
         h: list[FloatArray] = []
         for q in seq:
-            while len(h) >= 2 and np.cross(h[-1] - h[-2], q - h[-2]) <= 0:
+            while len(h) >= 2 and _cross2(h[-1] - h[-2], q - h[-2]) <= 0:
                 h.pop()
             h.append(q)
         return h

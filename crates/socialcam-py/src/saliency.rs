@@ -90,7 +90,7 @@ type ChargeArrays<'py> = (
 /// `region_centre (C,3)`, `region_axes (C,3,3)` (columns are the axes), `region_radii (C,3)`.
 #[pyfunction]
 #[pyo3(signature = (p, v, h, offsets, seed, seeds_per_ray=20, depth_min=0.3, depth_max=10.0,
-    tol=1e-5, max_iter=500, merge_radius=0.2, member_sigma=2.5, min_members=2,
+    tol=1e-5, newton=true, max_iter=100, merge_radius=0.2, member_sigma=2.5, min_members=2,
     exclusive=true, min_magnitude=0.0, bounds=None, region_level=0.8, region_max_radius=10.0))]
 #[allow(clippy::too_many_arguments)]
 fn find_charges<'py>(
@@ -104,6 +104,7 @@ fn find_charges<'py>(
     depth_min: f64,
     depth_max: f64,
     tol: f64,
+    newton: bool,
     max_iter: usize,
     merge_radius: f64,
     member_sigma: f64,
@@ -119,6 +120,7 @@ fn find_charges<'py>(
         depth_min,
         depth_max,
         tol,
+        newton,
         max_iter,
         merge_radius,
         member_sigma,

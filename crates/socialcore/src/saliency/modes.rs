@@ -20,6 +20,9 @@ pub struct ModeOptions {
     pub depth_max: f64,
     /// A seed has converged when an iteration moves it less than `tol` metres.
     pub tol: f64,
+    /// Accelerate Eq 6.7 with Newton steps inside a mode's basin (see `climb`); `false`
+    /// runs the plain update of Eq 6.7 (slow along elongated modes).
+    pub newton: bool,
     /// Iteration cap per seed; seeds that reach it (slow drift along a lone ray's ridge)
     /// are dropped.
     pub max_iter: usize,
@@ -57,7 +60,8 @@ impl Default for ModeOptions {
             depth_min: 0.3,
             depth_max: 10.0,
             tol: 1e-5,
-            max_iter: 500,
+            newton: true,
+            max_iter: 100,
             merge_radius: 0.2,
             member_sigma: 2.5,
             min_members: 2,
@@ -231,38 +235,67 @@ struct Climb {
     converged: bool,
 }
 
+/// Relative field gain per iteration below which a climb counts as converged.
+const STALL_GAIN: f64 = 1e-10;
+
 /// Largest number of step halvings when an update of Eq 6.7 would lower the field.
 const MAX_HALVINGS: usize = 30;
 
-/// `N·f(x)`, `N·∇f(x)` and `N·∇²f(x)` in closed form (see [`ray_hessian`] for the terms).
-fn field_derivatives(rays: &GazeRays, x: &Vector3<f64>) -> (f64, Vector3<f64>, Matrix3<f64>) {
-    let mut f = 0.0;
-    let mut g = Vector3::zeros();
-    let mut hs = Matrix3::zeros();
+/// [`ShiftTerms`] plus `N·∇f(x)` and `N·∇²f(x)` in closed form (see [`ray_hessian`] for
+/// the terms), in one pass over the rays.
+struct FullTerms {
+    shift: ShiftTerms,
+    grad: Vector3<f64>,
+    hess: Matrix3<f64>,
+}
+
+fn full_terms(rays: &GazeRays, x: &Vector3<f64>) -> FullTerms {
+    let mut t = FullTerms {
+        shift: ShiftTerms {
+            field_sum: 0.0,
+            num: Vector3::zeros(),
+            den: 0.0,
+        },
+        grad: Vector3::zeros(),
+        hess: Matrix3::zeros(),
+    };
     for i in 0..rays.len() {
         let (p, v, h) = (&rays.p[i], &rays.v[i], rays.h[i]);
         let w = x - p;
         let s = w.dot(v);
-        if s < MIN_DEPTH {
+        if s < 0.0 {
             continue;
         }
-        let ww = w.norm_squared();
+        let perp = w - v * s;
+        let pp = perp.norm_squared();
+        if s < MIN_DEPTH {
+            if pp == 0.0 {
+                t.shift.field_sum += INV_SQRT_2PI / h;
+            }
+            continue;
+        }
         let h2 = h * h;
-        let q = (ww / (s * s) - 1.0).max(0.0) / h2;
+        let s2 = s * s;
+        let q = pp / (s2 * h2);
         if q > Q_CUTOFF {
             continue;
         }
-        let fi = (-0.5 * q).exp() * INV_SQRT_2PI / h;
-        let grad_q = (w - v * (ww / s)) * (2.0 / (h2 * s * s));
-        let hess_q = (Matrix3::identity() / (s * s)
-            - (w * v.transpose() + v * w.transpose()) * (2.0 / (s * s * s))
-            + v * v.transpose() * (3.0 * ww / (s * s * s * s)))
+        let e = (-0.5 * q).exp();
+        let fi = e * INV_SQRT_2PI / h;
+        t.shift.field_sum += fi;
+        let wi = e / (h2 * h * s2);
+        t.shift.num += (x - perp + v * (pp / s)) * wi;
+        t.shift.den += wi;
+        let ww = pp + s2;
+        let grad_q = (w - v * (ww / s)) * (2.0 / (h2 * s2));
+        let hess_q = (Matrix3::identity() / s2
+            - (w * v.transpose() + v * w.transpose()) * (2.0 / (s2 * s))
+            + v * v.transpose() * (3.0 * ww / (s2 * s2)))
             * (2.0 / h2);
-        f += fi;
-        g -= grad_q * (0.5 * fi);
-        hs += (grad_q * grad_q.transpose() * 0.25 - hess_q * 0.5) * fi;
+        t.grad -= grad_q * (0.5 * fi);
+        t.hess += (grad_q * grad_q.transpose() * 0.25 - hess_q * 0.5) * fi;
     }
-    (f, g, hs)
+    t
 }
 
 /// Climbs from `x0` with the mean-shift update of Eq 6.7, accelerated near a mode.
@@ -275,34 +308,47 @@ fn field_derivatives(rays: &GazeRays, x: &Vector3<f64>) -> (f64, Vector3<f64>, M
 /// is not guaranteed by theory). If no halving helps, `x` is a numerical maximum.
 fn climb(rays: &GazeRays, x0: Vector3<f64>, opts: &ModeOptions) -> Climb {
     let n = rays.len() as f64;
+    let eval = |x: &Vector3<f64>| {
+        if opts.newton {
+            full_terms(rays, x)
+        } else {
+            FullTerms {
+                shift: shift_terms(rays, x),
+                grad: Vector3::zeros(),
+                hess: Matrix3::zeros(),
+            }
+        }
+    };
     let mut x = x0;
-    let mut terms = shift_terms(rays, &x);
+    let mut terms = eval(&x);
     for _ in 0..opts.max_iter {
-        if terms.den <= 0.0 {
+        let here = &terms.shift;
+        if here.den <= 0.0 {
             return Climb {
                 x,
-                value: terms.field_sum / n,
+                value: here.field_sum / n,
                 converged: false,
             };
         }
         let mut next = None;
         let mut moved = 0.0;
-        let (_, grad, hess) = field_derivatives(rays, &x);
-        if let Some(chol) = (-hess).cholesky() {
-            let step = chol.solve(&grad);
-            let xn = x + step;
-            let tn = shift_terms(rays, &xn);
-            if tn.field_sum >= terms.field_sum {
-                moved = step.norm();
-                next = Some((xn, tn));
+        if opts.newton {
+            if let Some(chol) = (-terms.hess).cholesky() {
+                let step = chol.solve(&terms.grad);
+                let xn = x + step;
+                let tn = eval(&xn);
+                if tn.shift.field_sum >= here.field_sum {
+                    moved = step.norm();
+                    next = Some((xn, tn));
+                }
             }
         }
         if next.is_none() {
-            let mut step = terms.num / terms.den - x;
+            let mut step = here.num / here.den - x;
             for _ in 0..MAX_HALVINGS {
                 let xn = x + step;
-                let tn = shift_terms(rays, &xn);
-                if tn.field_sum >= terms.field_sum * (1.0 - 1e-12) {
+                let tn = eval(&xn);
+                if tn.shift.field_sum >= here.field_sum * (1.0 - 1e-12) {
                     moved = step.norm();
                     next = Some((xn, tn));
                     break;
@@ -313,23 +359,28 @@ fn climb(rays: &GazeRays, x0: Vector3<f64>, opts: &ModeOptions) -> Climb {
         let Some((xn, tn)) = next else {
             return Climb {
                 x,
-                value: terms.field_sum / n,
+                value: here.field_sum / n,
                 converged: true,
             };
         };
+        // Converged when the step is below `tol`, or when the field no longer grows
+        // (relative gain ≤ STALL_GAIN): a seed stalled on a lone ray's ridge, far from
+        // every other ray, creeps by steps above `tol` for ever.
+        let gain = tn.shift.field_sum - here.field_sum;
+        let stalled = gain <= STALL_GAIN * here.field_sum;
         x = xn;
         terms = tn;
-        if moved < opts.tol {
+        if moved < opts.tol || stalled {
             return Climb {
                 x,
-                value: terms.field_sum / n,
+                value: terms.shift.field_sum / n,
                 converged: true,
             };
         }
     }
     Climb {
         x,
-        value: terms.field_sum / n,
+        value: terms.shift.field_sum / n,
         converged: false,
     }
 }
