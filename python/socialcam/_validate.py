@@ -52,3 +52,63 @@ def readonly(arr: np.ndarray) -> np.ndarray:
     """Marks an array read-only (result objects are immutable) and returns it."""
     arr.flags.writeable = False
     return arr
+
+
+# --- scalar options -----------------------------------------------------------------
+# One layer, one style: every public function and every options dataclass checks its
+# scalar arguments with these helpers, so a bad value raises ``ValueError("name: ...")``
+# (never a TypeError, OverflowError or a raw numpy message, and never a silent truncation
+# such as ``k=2.9`` → 2).
+
+_I64_MAX = 2**63 - 1
+
+
+def check_int(
+    value: object,
+    name: str,
+    *,
+    min: int | None = None,
+    max: int | None = None,
+) -> int:
+    """An integer option: Python/numpy integers only (no bool, no float), within bounds."""
+    if isinstance(value, bool) or not isinstance(value, (int, np.integer)):
+        raise ValueError(f"{name}: expected an integer, got {value!r}")
+    v = int(value)
+    lo = min
+    hi = _I64_MAX if max is None else max
+    if lo is not None and v < lo:
+        raise ValueError(f"{name}: expected an integer ≥ {lo}, got {v}")
+    if v > hi:
+        raise ValueError(f"{name}: expected an integer ≤ {hi}, got {v}")
+    return v
+
+
+def check_float(
+    value: object,
+    name: str,
+    *,
+    min: float | None = None,
+    max: float | None = None,
+    min_exclusive: bool = False,
+    allow_inf: bool = False,
+) -> float:
+    """A real option: finite (unless ``allow_inf``), not NaN, within bounds."""
+    if isinstance(value, bool) or not isinstance(value, (int, float, np.integer, np.floating)):
+        raise ValueError(f"{name}: expected a real number, got {value!r}")
+    v = float(value)
+    if np.isnan(v) or (np.isinf(v) and not allow_inf):
+        raise ValueError(f"{name}: expected a finite number, got {v}")
+    if min is not None and (v <= min if min_exclusive else v < min):
+        raise ValueError(
+            f"{name}: expected a number {'>' if min_exclusive else '≥'} {min}, got {v}"
+        )
+    if max is not None and v > max:
+        raise ValueError(f"{name}: expected a number ≤ {max}, got {v}")
+    return v
+
+
+def check_choice(value: object, name: str, choices: Sequence[str]) -> str:
+    """A string option from a fixed set."""
+    if not isinstance(value, str) or value not in choices:
+        raise ValueError(f"{name}: expected one of {', '.join(map(repr, choices))}, got {value!r}")
+    return value

@@ -14,6 +14,9 @@ pub enum Error {
     /// An iterative method reached its cap without meeting its tolerance.
     #[error("did not converge after {iterations} iterations")]
     NotConverged { iterations: usize },
+    /// The caller asked the computation to stop ([`crate::interrupt::request`]).
+    #[error("interrupted")]
+    Interrupted,
 }
 
 impl Error {

@@ -24,6 +24,7 @@ pub mod basis;
 pub mod bqp;
 pub mod error;
 pub mod geometry;
+pub mod interrupt;
 pub mod trajectory;
 // issue 6: gaze field (thesis Chapter 7)
 pub mod gazefield;
