@@ -34,6 +34,7 @@ from socialcam.charges import (
     track_charges,
 )
 from socialcam.errors import ConvergenceError, DegenerateError
+from socialcam.gaze import GazeCalibration, calibrate_gaze
 from socialcam.gazefield import (
     Anomalies,
     GazeCrossValidation,
@@ -68,6 +69,7 @@ __all__ = [
     "ChargeTrack",
     "ConvergenceError",
     "DegenerateError",
+    "GazeCalibration",
     "GazeCrossValidation",
     "GazeField",
     "GazeRays",
@@ -80,6 +82,7 @@ __all__ = [
     "align_similarity",
     "articulated_bqp",
     "articulated_reconstructability",
+    "calibrate_gaze",
     "cross_validate_gaze",
     "dct_basis",
     "detect_anomalies",

@@ -296,3 +296,25 @@ def articulated_bqp(
     fit_radius: bool = False,
 ) -> tuple[_F64, _F64, float]:
     """``(Q (n,n), c (n,), constant)`` of Eq 4.12."""
+
+# --- ego-motion gaze calibration (thesis Sec 3.2.1, Eq 3.1) ---------------------------
+
+def calibrate_gaze(
+    r: npt.NDArray[np.float64],
+    c: npt.NDArray[np.float64],
+    lambda_c: float,
+    lambda_axis: float,
+    max_iter: int,
+    tol: float,
+) -> dict[str, Any]:
+    """Eq 3.1 on one fixation segment: ``R (F,3,3)`` world→camera, ``C (F,3)`` centres →
+    dict of ``p, v, y (3,)``, ``h``, ``p_std, y_std (3,)``, ``v_std``, ``h_rel_std``,
+    ``residuals (F,)``, ``iterations``, ``converged``."""
+
+def gaze_rays(
+    r: npt.NDArray[np.float64],
+    c: npt.NDArray[np.float64],
+    p: npt.NDArray[np.float64],
+    v: npt.NDArray[np.float64],
+) -> tuple[npt.NDArray[np.float64], npt.NDArray[np.float64]]:
+    """World rays ``p_i = R_iᵀ p + C_i``, ``v_i = R_iᵀ v`` → ``(p (F,3), v (F,3))``."""

@@ -10,6 +10,8 @@ use pyo3::prelude::*;
 mod bqp;
 mod convert;
 mod errors;
+// issue 10: ego-motion gaze calibration
+mod gaze;
 mod geometry;
 mod saliency;
 mod trajectory;
@@ -25,5 +27,6 @@ fn _core(m: &Bound<'_, PyModule>) -> PyResult<()> {
     saliency::register(m)?;
     gazefield::register(m)?;
     bqp::register(m)?;
+    gaze::register(m)?;
     Ok(())
 }

@@ -28,6 +28,8 @@ pub mod interrupt;
 pub mod trajectory;
 // issue 6: gaze field (thesis Chapter 7)
 pub mod gazefield;
+// issue 10: ego-motion gaze calibration (thesis Sec 3.2.1)
+pub mod gaze;
 
 pub use error::{Error, Result};
 pub mod saliency;

@@ -9,6 +9,7 @@ Building blocks
 - observations: :func:`observe` → :class:`Observations` (pixel noise, missing data)
 - people: :func:`wander`, :func:`looking_at` → :class:`People` (gaze model of Sec 3.1)
 - a ready scene: :func:`multiview_scene`
+- gaze calibration: :func:`fixation_segment` → :class:`FixationSegment` (Sec 3.2.1)
 - social scenes with known joint attention: :func:`mocap_replica`, :func:`meeting`,
   :func:`party` → :class:`SocialScene`; :func:`mafia` → :class:`MafiaScene` (with
   inattentive players)
@@ -19,6 +20,7 @@ from __future__ import annotations
 from dataclasses import dataclass
 
 from socialcam.camera import Cameras
+from socialcam.synth.calibration import FixationSegment, fixation_segment
 from socialcam.synth.cameras import (
     head_mounted,
     intrinsics,
@@ -60,12 +62,14 @@ def multiview_scene(
 
 
 __all__ = [
+    "FixationSegment",
     "MafiaScene",
     "MultiviewScene",
     "Observations",
     "People",
     # social scenes (issue 5)
     "SocialScene",
+    "fixation_segment",
     "head_mounted",
     "intrinsics",
     "look_at",
