@@ -177,7 +177,7 @@ def _pair(ref: _Track, other: _Track) -> tuple[float, float]:
         if den < 0:
             frac = float(np.clip(0.5 * (r[j - 1] - r[j + 1]) / den, -0.5, 0.5))
     lag = float(ls[j]) + frac
-    ncc = _event_ncc(x, y, int(ls[j]), ref.env, rate, hop)
+    ncc = _event_ncc(x, y, int(ls[j]), a, b, int(lags[i]), rate, hop)
     return lag / rate, separation * max(ncc, 0.0)
 
 
@@ -191,32 +191,36 @@ def _dot_at(x: FloatArray, y: FloatArray, lag: int) -> float:
 
 
 def _event_ncc(
-    x: FloatArray, y: FloatArray, lag: int, env: FloatArray, rate: int, hop: int
+    x: FloatArray,
+    y: FloatArray,
+    lag: int,
+    env_x: FloatArray,
+    env_y: FloatArray,
+    env_lag: int,
+    rate: int,
+    hop: int,
 ) -> float:
-    """Normalised correlation of ``x[n]`` and ``y[n - lag]`` over 40 ms windows at the
-    strongest onsets of ``x`` that fall inside the overlap."""
-    lo = max(0, lag)
-    hi = min(len(x), len(y) + lag)
-    if hi - lo < rate * 0.05:
-        return 0.0
-    e = env.copy()
-    idx = np.arange(len(e)) * hop
-    e[(idx < lo) | (idx >= hi - int(0.04 * rate))] = -np.inf
-    picks: list[int] = []
+    """Normalised correlation of ``x[n]`` and ``y[n - lag]`` in short windows (2 ms
+    before to 15 ms after) at the onsets that are strong in both envelopes once aligned
+    (at most five, 100 ms apart): the shared events. 0 when there is none."""
+    n = len(env_x)
+    k = np.arange(n)
+    kb = k - env_lag
+    ok = (kb >= 0) & (kb < len(env_y))
+    both = np.full(n, -np.inf)
+    both[ok] = np.minimum(env_x[ok], env_y[kb[ok]])
     guard = int(0.1 * rate / hop)
-    for _ in range(5):
-        k = int(np.argmax(e))
-        if not np.isfinite(e[k]) or e[k] < 3.0:
-            break
-        picks.append(k * hop)
-        e[max(0, k - guard) : k + guard] = -np.inf
-    if not picks:
-        return 0.0
+    pre, post = int(0.002 * rate), int(0.015 * rate)
     num = sxx = syy = 0.0
-    L = int(0.04 * rate)
-    for p in picks:
-        s0 = max(lo, p - L // 4)
-        s1 = min(hi, s0 + L)
+    for _ in range(5):
+        i = int(np.argmax(both))
+        if not np.isfinite(both[i]) or both[i] < 3.0:
+            break
+        both[max(0, i - guard) : i + guard] = -np.inf
+        s0, s1 = i * hop - pre, i * hop + post
+        s0, s1 = max(s0, lag, 0), min(s1, len(x), len(y) + lag)
+        if s1 - s0 < 8:
+            continue
         a = x[s0:s1]
         b = y[s0 - lag : s1 - lag]
         num += float(a @ b)
@@ -231,7 +235,7 @@ def synchronize(
     videos: Sequence[str | Path | Video],
     *,
     manual_offsets: Mapping[str, float] | None = None,
-    min_confidence: float = 0.3,
+    min_confidence: float = 0.5,
 ) -> SyncResult:
     """Offsets of ``videos`` on the common clock (the first video's first frame is 0).
 

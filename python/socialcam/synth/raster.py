@@ -152,15 +152,17 @@ class _Batch:
     tiles: list[_Tile]
     corners: FloatArray  # (N, 4, 3)
     normals: FloatArray  # (N, 3)
+    depth_test: bool = True
 
     @staticmethod
-    def of(items: Sequence[_Tile]) -> _Batch:
+    def of(items: Sequence[_Tile], depth_test: bool = True) -> _Batch:
         if not items:
-            return _Batch([], np.zeros((0, 4, 3)), np.zeros((0, 3)))
+            return _Batch([], np.zeros((0, 4, 3)), np.zeros((0, 3)), depth_test)
         return _Batch(
             list(items),
             np.stack([t.plane.corners() for t in items]),
             np.stack([t.parent.normal for t in items]),
+            depth_test,
         )
 
 
@@ -197,10 +199,14 @@ class Renderer:
         h, w = self._mips[index][0].shape[:2]
         return h, w
 
-    def prepare(self, planes: Sequence[Plane], tile_size: float | None = None) -> _Batch:
-        """Tiles planes (see :func:`tiles`) into a batch; static planes are prepared once."""
+    def prepare(
+        self, planes: Sequence[Plane], tile_size: float | None = None, *, depth_test: bool = True
+    ) -> _Batch:
+        """Tiles planes (see :func:`tiles`) into a batch; static planes are prepared once.
+        ``depth_test=False`` is for the first batch of surfaces that cannot occlude each
+        other (the inside of a convex room): they are drawn without comparing depths."""
         ts = self.tile_size if tile_size is None else tile_size
-        return _Batch.of([_Tile(t, p) for p in planes for t in tiles(p, ts)])
+        return _Batch.of([_Tile(t, p) for p in planes for t in tiles(p, ts)], depth_test)
 
     def render(self, R: FloatArray, C: FloatArray, *batches: _Batch) -> U8Image:
         """An RGB frame ``(height, width, 3)`` of the tiles seen by the camera ``R, C``."""
@@ -224,7 +230,7 @@ class Renderer:
                 | (py > self.height).all(axis=1)
             )
             for i in np.nonzero(front & ahead & ~off)[0]:
-                self._draw(img, zbuf, R, C, Xc[i], b.tiles[i].parent)
+                self._draw(img, zbuf, R, C, Xc[i], b.tiles[i].parent, b.depth_test)
         return img
 
     def _draw(
@@ -235,6 +241,7 @@ class Renderer:
         C: FloatArray,
         Xc: FloatArray,
         parent: Plane,
+        depth_test: bool = True,
     ) -> None:
         """Draws one tile (corners ``Xc (4, 3)`` in the camera frame) of ``parent``."""
         poly = _clip_near(Xc, NEAR)
@@ -254,17 +261,17 @@ class Renderer:
         d_c = float(n_c @ Xc[0])
         if abs(d_c) < 1e-12:
             return
-        g = (self._Kinv.T @ n_c) / d_c
-        invz = (g[0] * self._xs[x0:x1])[None, :] + (g[1] * self._ys[y0:y1])[:, None]
-        invz += np.float32(g[2])
+        g = ((self._Kinv.T @ n_c) / d_c).astype(np.float32)
+        invz = np.add.outer(g[1] * self._ys[y0:y1] + g[2], g[0] * self._xs[x0:x1])
         mask = np.zeros((bh, bw), np.uint8)
         cv2.fillConvexPoly(
-            mask, np.round((pix - (x0, y0)) * 16).astype(np.int32), (1,), cv2.LINE_8, 4
+            mask, np.round((pix - (x0, y0)) * 16).astype(np.int32), (255,), cv2.LINE_8, 4
         )
         sub_z = zbuf[y0:y1, x0:x1]
-        keep = (mask > 0) & (invz > sub_z)
-        if not keep.any():
-            return
+        if depth_test:
+            cv2.bitwise_and(mask, cv2.compare(invz, sub_z, cv2.CMP_GT), dst=mask)
+            if not cv2.countNonZero(mask):
+                return
         # texel → pixel homography of the parent's level-0 texture
         mips = self._mips[parent.texture]
         th, tw = mips[0].shape[:2]
@@ -285,8 +292,8 @@ class Renderer:
         warped = cv2.warpPerspective(
             mips[level], T @ H @ S, (bw, bh), flags=cv2.INTER_LINEAR, borderMode=cv2.BORDER_REFLECT
         )
-        img[y0:y1, x0:x1][keep] = warped[keep]
-        sub_z[keep] = invz[keep]
+        cv2.copyTo(warped, mask, img[y0:y1, x0:x1])
+        cv2.copyTo(invz, mask, sub_z)
 
 
 def mip_pyramid(texture: U8Image) -> list[U8Image]:

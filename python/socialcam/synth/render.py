@@ -14,7 +14,7 @@ What is simulated (all seeded, all recorded in :class:`SceneTruth`):
   moving targets (small textured cubes), another wearer's head, or a random point on the
   walls ("around"). The true gaze ray goes from the eye centre ``p`` to the point of
   regard; the head (primary gaze ``v``) follows it with a rate-limited smooth pursuit
-  (≤ 115°/s) and deviates from it by a smooth eye-in-head offset ``m(t)`` whose
+  (≤ 200°/s) and deviates from it by a smooth eye-in-head offset ``m(t)`` whose
   components have standard deviation ``h`` on the plane at unit distance (true gaze
   through ``v + m``).
 - **Head-mounted camera**: fixed per wearer — the eye centre at ``eye_offset`` in the
@@ -68,7 +68,9 @@ U8Image = npt.NDArray[np.uint8]
 IntArray = npt.NDArray[np.int64]
 
 AUDIO_RATE = 48000
+N_SHELL = 6  # the first planes of a room are its walls, floor and ceiling (convex shell)
 GRID_HZ = 240.0  # simulation grid of the motion (frames interpolate it)
+PRE_ROLL = 2.0  # s simulated before true time 0, so that the first frames are settled
 #: target codes in ``SceneTruth.target_of``: ``k ≥ 0`` moving target ``k``; ``AROUND``
 #: a point on the walls; ``CALIBRATION`` the calibration point; ``HEAD - w`` wearer ``w``.
 AROUND = -1
@@ -459,7 +461,7 @@ def _plan_motion(
 ) -> tuple[_Motion, FloatArray]:
     """Walking, gaze targets and head motion of every wearer on a ``GRID_HZ`` grid."""
     dt = 1.0 / GRID_HZ
-    t = np.arange(0.0, t_end + 2 * dt, dt)
+    t = np.arange(-PRE_ROLL, t_end + 2 * dt, dt)
     G, V = len(t), n_wearers
     ax, ay = room.loop
     _W, _D, _H = room.size
@@ -502,8 +504,8 @@ def _plan_motion(
             tau = t[inside] - c0
             L = c1 - c0
             win = np.sin(np.pi * np.clip(tau / L, 0, 1)) ** 2
-            fb = 0.3 * np.sin(2 * np.pi * tau * 3.0 / L)
-            lr = 0.3 * np.sin(2 * np.pi * tau * 2.0 / L + 0.5)
+            fb = 0.25 * np.sin(2 * np.pi * 0.5 * tau)  # back and forth, 0.5 Hz
+            lr = 0.25 * np.sin(2 * np.pi * 0.4 * tau + 0.5)  # side to side, 0.4 Hz
             eyes[inside, v] += win[:, None] * (fb[:, None] * normal + lr[:, None] * side)
     vel = np.gradient(eyes[:, :, :2], dt, axis=0)
     body_yaw = np.unwrap(np.arctan2(vel[..., 1], vel[..., 0]), axis=0)
@@ -556,19 +558,25 @@ def _plan_motion(
         c0, c1 = calib[v]
         inside = (t >= c0) & (t < c1)
         code[inside, v] = CALIBRATION
-        regard[inside, v] = calib_pts[v]
+        # the wearer turns to the point before the segment starts (pursuit settles)
+        regard[(t >= c0 - 1.0) & (t < c1), v] = calib_pts[v]
     u = regard - eyes
     u /= np.linalg.norm(u, axis=-1, keepdims=True)
-    # --- head: rate-limited smooth pursuit of the true gaze, then eye-in-head offset
-    tau, max_rate = 0.12, 2.0
+    # --- head: rate-limited smooth pursuit of the true gaze after a change of target (the
+    # head turns), tight tracking once the target is held (then the primary gaze deviates
+    # from the true gaze by the eye-in-head offset only)
+    tau_turn, tau_hold, max_rate, settle = 0.1, 0.01, 3.5, 0.6
+    switched = np.vstack([np.ones((1, V), bool), code[1:] != code[:-1]])
+    last = np.maximum.accumulate(np.where(switched, np.arange(G)[:, None], 0), axis=0)
+    holding = (np.arange(G)[:, None] - last) * dt > settle
+    a_turn, a_hold = 1 - np.exp(-dt / tau_turn), 1 - np.exp(-dt / tau_hold)
     track = np.empty_like(u)
     track[0] = u[0]
-    alpha = 1 - np.exp(-dt / tau)
     for g in range(1, G):
         prev = track[g - 1]
         cosang = np.clip((prev * u[g]).sum(-1), -1.0, 1.0)
         ang = np.arccos(cosang)
-        stepang = np.minimum(ang * alpha, max_rate * dt)
+        stepang = np.where(holding[g], ang * a_hold, np.minimum(ang * a_turn, max_rate * dt))
         perp = u[g] - cosang[:, None] * prev
         pn = np.linalg.norm(perp, axis=-1, keepdims=True)
         perp = np.where(pn > 1e-12, perp / np.maximum(pn, 1e-12), 0.0)
@@ -732,7 +740,7 @@ def _audio(
         b /= b.std() + 1e-12
         tt = np.arange(i1 - i0) / AUDIO_RATE
         env = np.abs(np.sin(2 * np.pi * rng.uniform(3, 5) * tt)) * np.sin(np.pi * tt / length)
-        x[i0:i1] += gain * rng.uniform(2, 5) * env * b
+        x[i0:i1] += gain * rng.uniform(1.5, 3) * env * b
     for tc, wave, g, d in zip(claps, clap_waves, clap_gain, delays, strict=True):
         lo = max(0, int((tc + d - start) * AUDIO_RATE) - 2)
         hi = min(n, lo + int(0.08 * AUDIO_RATE))
@@ -742,6 +750,33 @@ def _audio(
 
 
 # ----------------------------------------------------------------------------- lens
+def distort_radius(kind: str, params: Sequence[float], ru: FloatArray) -> FloatArray:
+    """Distorted radius (normalised image plane) of undistorted radius ``ru``: OpenCV's
+    ``radial`` model ``r (1 + k1 r² + k2 r⁴)`` or ``fisheye`` model ``θ (1 + k1 θ² + k2 θ⁴
+    + k3 θ⁶ + k4 θ⁸)`` with ``θ = atan r``."""
+    if kind == "radial":
+        r2 = ru * ru
+        return np.asarray(ru * (1 + params[0] * r2 + params[1] * r2 * r2))
+    th = np.arctan(ru)
+    t2 = th * th
+    k1, k2, k3, k4 = params
+    return np.asarray(th * (1 + t2 * (k1 + t2 * (k2 + t2 * (k3 + t2 * k4)))))
+
+
+def undistort_radius(kind: str, params: Sequence[float], rd: FloatArray) -> FloatArray:
+    """Inverse of :func:`distort_radius` by Newton's method (monotone in the image)."""
+    r = rd.copy()
+    for _ in range(50):
+        h = 1e-7
+        fr = distort_radius(kind, params, r) - rd
+        df = (distort_radius(kind, params, r + h) - distort_radius(kind, params, r - h)) / (2 * h)
+        step = fr / np.where(np.abs(df) > 1e-9, df, 1e-9)
+        r = np.maximum(r - step, 0.0)
+        if np.abs(step).max() < 1e-13:
+            break
+    return r
+
+
 def _lens(
     kind: str | None, width: int, height: int, rng: np.random.Generator
 ) -> tuple[
@@ -772,11 +807,9 @@ def _lens(
         }
         return K, dist, None, None, (width, height)
     xs, ys = np.meshgrid(np.arange(width, dtype=np.float64), np.arange(height, dtype=np.float64))
-    pts = np.stack([xs.ravel(), ys.ravel()], axis=1)[:, None, :]
-    crit = (cv2.TERM_CRITERIA_COUNT | cv2.TERM_CRITERIA_EPS, 50, 1e-10)
+    xd = np.stack([(xs.ravel() - cx) / f, (ys.ravel() - cy) / f], axis=1)
+    rd = np.linalg.norm(xd, axis=1)
     if kind == "radial":
-        d = np.array([params[0], params[1], 0.0, 0.0])
-        und = cv2.undistortPointsIter(pts, K, d, None, None, crit)[:, 0]
         dist = {
             "model": "radial",
             "params": params,
@@ -784,14 +817,15 @@ def _lens(
             "colmap_params": [f, cx + 0.5, cy + 0.5, *params],
         }
     else:
-        d = np.array(params)
-        und = cv2.fisheye.undistortPoints(pts, K, d, criteria=crit)[:, 0]
         dist = {
             "model": "fisheye",
             "params": params,
             "colmap_model": "OPENCV_FISHEYE",
             "colmap_params": [f, f, cx + 0.5, cy + 0.5, *params],
         }
+    ru = undistort_radius(kind, params, rd)
+    scale = np.where(rd > 1e-12, ru / np.maximum(rd, 1e-12), 1.0)
+    und = xd * scale[:, None]
     # pinhole canvas with the same focal length, large enough for every ray
     half_w = int(np.ceil(np.abs(und[:, 0]).max() * f)) + 2
     half_h = int(np.ceil(np.abs(und[:, 1]).max() * f)) + 2
@@ -805,6 +839,30 @@ def _lens(
 # ----------------------------------------------------------------------------- writing
 def _fps_fraction(fps: float) -> Fraction:
     return Fraction(fps).limit_denominator(1001)
+
+
+def _yuv_frame(img: U8Image) -> Any:
+    """An ``av.VideoFrame`` (yuv420p) of an RGB image with every byte defined.
+
+    The RGB → YUV 4:2:0 conversion (BT.601, limited range) is done by OpenCV, and each
+    plane's row padding is zeroed so that every byte the encoder's SIMD code may read is
+    defined (determinism).
+    """
+    import av
+
+    h, w = img.shape[:2]
+    yuv = cv2.cvtColor(np.ascontiguousarray(img), cv2.COLOR_RGB2YUV_I420)
+    planes = (
+        yuv[:h],
+        yuv[h : h + h // 4].reshape(h // 2, w // 2),
+        yuv[h + h // 4 :].reshape(h // 2, w // 2),
+    )
+    vf = av.VideoFrame(w, h, "yuv420p")
+    for plane, arr in zip(vf.planes, planes, strict=True):
+        buf = np.zeros((plane.height, plane.line_size), np.uint8)
+        buf[:, : arr.shape[1]] = arr
+        plane.update(buf)
+    return vf
 
 
 def _write_video(
@@ -825,7 +883,9 @@ def _write_video(
         vs = out.add_stream("libx264", rate=rate)
         vs.width, vs.height = width, height
         vs.pix_fmt = "yuv420p"
-        vs.options = {"crf": str(crf), "preset": "veryfast"}
+        # mbtree off: with it, identical runs gave different files now and then on this
+        # machine (x264's float SIMD; also gone with asm=0, which is 15× slower)
+        vs.options = {"crf": str(crf), "preset": "veryfast", "x264-params": "mbtree=0"}
         vs.codec_context.gop_size = 30
         vs.codec_context.time_base = 1 / rate
         aus = None
@@ -845,7 +905,7 @@ def _write_video(
             for pkt in aus.encode(None):
                 out.mux(pkt)
         for k, img in enumerate(frames()):
-            vf = av.VideoFrame.from_ndarray(img, format="rgb24")
+            vf = _yuv_frame(img)
             vf.pts = k
             vf.time_base = 1 / rate
             for pkt in vs.encode(vf):
@@ -928,7 +988,7 @@ def render_scene(
     start = np.round(rng.uniform(0.0, spread, V), 6)
     start[rng.integers(0, V)] = 0.0 if V > 1 else start[0]
     t_end = float(start.max() + dur + 0.5)
-    calib_len = min(3.0, 0.3 * dur)
+    calib_len = min(6.0, 0.3 * dur)
     calib = [
         (
             float(start[v] + 0.1 * min(1.0, dur / 2)),
@@ -1000,6 +1060,8 @@ def render_scene(
             R, C, p, hv = _camera_poses(motion, v, times, R_cg, eye_offset[v])
             regard = motion.at("regard", times)[:, v]
             code = motion.code_at(times)[:, v]
+            if calibration:
+                code[(times >= calib[v][0]) & (times < calib[v][1])] = CALIBRATION
             ut = regard - p
             ut /= np.linalg.norm(ut, axis=1, keepdims=True)
             for k, a in (
@@ -1014,12 +1076,13 @@ def render_scene(
             ):
                 truths[k].append(a)
             renderer = Renderer(K if Kr is None else Kr, rw, rh, tex)
-            static = renderer.prepare(room.planes)
+            shell = renderer.prepare(room.planes[:N_SHELL], depth_test=False)
+            static = renderer.prepare(room.planes[N_SHELL:])
             rng_a = np.random.default_rng([seed_, 17, v])
             track = None
             if audio:
                 gain = float(np.exp(rng_a.uniform(np.log(0.003), np.log(0.04))))
-                cg = rng_a.uniform(0.15, 0.8, nc)
+                cg = rng_a.uniform(0.25, 0.9, nc)
                 if sound_speed is None:
                     delays = np.zeros(nc)
                 else:
@@ -1041,7 +1104,7 @@ def render_scene(
                     dyn = _dynamic_planes(
                         motion, float(times[k]), v, body_tex, head_tex, target_tex, bodies
                     )
-                    img = renderer.render(R[k], C[k], static, renderer.prepare(dyn, 10.0))
+                    img = renderer.render(R[k], C[k], shell, static, renderer.prepare(dyn, 10.0))
                     if maps is not None:
                         img = cv2.remap(
                             img, maps[0], maps[1], cv2.INTER_LINEAR, borderMode=cv2.BORDER_REPLICATE
