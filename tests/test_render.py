@@ -116,6 +116,7 @@ def test_projecting_surface_points_with_truth_cameras_lands_on_their_pixels(room
     K, R, C = truth.K[0], truth.R[0][f], truth.C[0][f]
     rays = np.c_[(px - K[:2, 2]) / K[0, 0], np.ones(50)] @ R
     idx, _, _, t = raycast(truth.room["planes"], C, rays)
+    assert (idx >= 0).all()
     X = C + t[:, None] * rays
     back = cams[f].project(X)
     np.testing.assert_allclose(back.reshape(-1, 2), px, atol=1e-6)
@@ -243,6 +244,7 @@ def test_same_seed_same_videos_different_seed_different(tmp_path):
     np.testing.assert_array_equal(a.truth.C[0], b.truth.C[0])
     assert np.abs(fa.astype(int) - fc.astype(int)).mean() > 10
     assert not np.array_equal(a.truth.C[0], c.truth.C[0])
+    assert not np.array_equal(aa[: len(ac)], ac[: len(aa)])
 
 
 def test_photos_as_textures(tmp_path, data_dir):

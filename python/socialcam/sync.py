@@ -164,12 +164,26 @@ def _pair(ref: _Track, other: _Track) -> tuple[float, float]:
     mask = np.abs(np.arange(len(c)) - i) > sep
     second = float(np.max(c[mask & ok])) if (mask & ok).any() else 0.0
     separation = 0.0 if first <= 0 else float(np.clip(1.0 - max(second, 0.0) / first, 0.0, 1.0))
-    coarse = int(lags[i]) * hop  # samples
-    # raw refinement around the coarse lag: r(l) = Σ ref[n] other[n - l]
-    w = REFINE_STEPS * hop + hop
-    ls = np.arange(coarse - w, coarse + w + 1)
+    env_lag = int(lags[i])
+    coarse = env_lag * hop  # samples
+    picks = _shared_onsets(a, b, env_lag, rate, hop)
+    if not picks:
+        return coarse / rate, 0.0
+    # sub-sample refinement on the raw signals, restricted to the shared events:
+    # r(l) = Σ x_w[n] y[n - l] with x windowed around the events (-5 ms, +40 ms)
     x, y = ref.x.astype(np.float64), other.x.astype(np.float64)
-    r = np.array([_dot_at(x, y, int(lag)) for lag in ls])
+    xw = np.zeros_like(x)
+    for p in picks:
+        s0, s1 = max(0, p - int(0.005 * rate)), min(len(x), p + int(0.04 * rate))
+        xw[s0:s1] = x[s0:s1]
+    w = (REFINE_STEPS + 1) * hop
+    r_full = signal.correlate(xw, y, mode="full", method="fft")
+    r_lags = signal.correlation_lags(len(xw), len(y), mode="full")
+    sel = (r_lags >= coarse - w) & (r_lags <= coarse + w)
+    r = r_full[sel]
+    ls = r_lags[sel]
+    if len(r) == 0:
+        return coarse / rate, 0.0
     j = int(np.argmax(r))
     frac = 0.0
     if 0 < j < len(r) - 1:
@@ -177,32 +191,15 @@ def _pair(ref: _Track, other: _Track) -> tuple[float, float]:
         if den < 0:
             frac = float(np.clip(0.5 * (r[j - 1] - r[j + 1]) / den, -0.5, 0.5))
     lag = float(ls[j]) + frac
-    ncc = _event_ncc(x, y, int(ls[j]), a, b, int(lags[i]), rate, hop)
+    ncc = _event_ncc(x, y, int(ls[j]), picks, rate)
     return lag / rate, separation * max(ncc, 0.0)
 
 
-def _dot_at(x: FloatArray, y: FloatArray, lag: int) -> float:
-    """Σ x[n] y[n - lag] over the overlap."""
-    lo = max(0, lag)
-    hi = min(len(x), len(y) + lag)
-    if hi <= lo:
-        return 0.0
-    return float(x[lo:hi] @ y[lo - lag : hi - lag])
-
-
-def _event_ncc(
-    x: FloatArray,
-    y: FloatArray,
-    lag: int,
-    env_x: FloatArray,
-    env_y: FloatArray,
-    env_lag: int,
-    rate: int,
-    hop: int,
-) -> float:
-    """Normalised correlation of ``x[n]`` and ``y[n - lag]`` in short windows (2 ms
-    before to 15 ms after) at the onsets that are strong in both envelopes once aligned
-    (at most five, 100 ms apart): the shared events. 0 when there is none."""
+def _shared_onsets(
+    env_x: FloatArray, env_y: FloatArray, env_lag: int, rate: int, hop: int
+) -> list[int]:
+    """Sample positions (in ``x``) of the onsets strong in both envelopes once aligned by
+    ``env_lag``: at most five, 100 ms apart, each ≥ 3 standard deviations in both."""
     n = len(env_x)
     k = np.arange(n)
     kb = k - env_lag
@@ -210,15 +207,24 @@ def _event_ncc(
     both = np.full(n, -np.inf)
     both[ok] = np.minimum(env_x[ok], env_y[kb[ok]])
     guard = int(0.1 * rate / hop)
-    pre, post = int(0.002 * rate), int(0.015 * rate)
-    num = sxx = syy = 0.0
+    picks: list[int] = []
     for _ in range(5):
         i = int(np.argmax(both))
         if not np.isfinite(both[i]) or both[i] < 3.0:
             break
         both[max(0, i - guard) : i + guard] = -np.inf
-        s0, s1 = i * hop - pre, i * hop + post
-        s0, s1 = max(s0, lag, 0), min(s1, len(x), len(y) + lag)
+        picks.append(i * hop)
+    return sorted(picks)
+
+
+def _event_ncc(x: FloatArray, y: FloatArray, lag: int, picks: list[int], rate: int) -> float:
+    """Normalised correlation of ``x[n]`` and ``y[n - lag]`` in short windows (2 ms
+    before to 15 ms after) at the shared onsets: the same clap recorded by two microphones
+    has the same waveform, two different sounds do not. 0 when there is none."""
+    pre, post = int(0.002 * rate), int(0.015 * rate)
+    num = sxx = syy = 0.0
+    for p in picks:
+        s0, s1 = max(p - pre, lag, 0), min(p + post, len(x), len(y) + lag)
         if s1 - s0 < 8:
             continue
         a = x[s0:s1]

@@ -983,7 +983,7 @@ def render_scene(
     rng = np.random.default_rng([seed_, 9])
     photos_ = load_photos([str(p) for p in photos]) if photos else None
     # texture detail follows the image resolution: 8 mm texels at 640 px wide
-    texel = float(np.clip(0.008 * 640 / width, 0.004, 0.02))
+    texel = float(np.clip(0.008 * 640 / width, 0.004, 0.06))
     room = build_room(room_size, seed=seed_, photos=photos_, texel=texel)
     start = np.round(rng.uniform(0.0, spread, V), 6)
     start[rng.integers(0, V)] = 0.0 if V > 1 else start[0]
@@ -1098,6 +1098,7 @@ def render_scene(
                 times: FloatArray = times,
                 renderer: Renderer = renderer,
                 static: _Batch = static,
+                shell: _Batch = shell,
                 maps: Any = maps,
             ) -> Any:
                 for k in range(F):
