@@ -37,7 +37,7 @@ def test_offsets_within_a_millisecond_of_the_truth(scenes, seed):
     assert err.max() < 1e-3, err
     assert res.method == ("reference", "audio", "audio")
     assert res.offsets[0] == 0 and res.confidence[0] == 1
-    assert (res.confidence[1:] >= 0.5).all()
+    assert (res.confidence[1:] >= 0.8).all()  # measured 0.85–0.99
     assert res.residual.max() < 1e-3  # pairwise offsets agree
     assert json.loads(json.dumps(res.to_dict()))["videos"][1]["name"] == "wearer1"
 

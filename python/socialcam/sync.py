@@ -16,12 +16,14 @@ videos every pair, so the offsets are checked for consistency and refined jointl
 3. **Sub-sample refinement** — cross-correlation of the raw band-passed signals within
    ±3 envelope steps of the coarse lag, and parabolic interpolation of its peak: a
    fraction of a sample (20 µs at 48 kHz).
-4. **Confidence** in [0, 1] — the product of (a) the envelope peak's separation from the
-   next-best lag outside ±50 ms (``1 - second / first``) and (b) the normalised
-   correlation of the raw waveforms in windows around the strongest shared onsets at the
-   refined lag (the same clap recorded by two microphones has the same waveform; two
-   unrelated claps do not). Below ``min_confidence`` the audio does not agree and
-   :class:`SyncError` is raised, naming the video, instead of returning a wrong offset.
+4. **Confidence** in [0, 1] — the normalised correlation of the raw waveforms in short
+   windows at the onsets that are strong in both tracks once aligned (the same clap
+   recorded by two microphones has the same waveform; two different sounds do not),
+   lowered when the envelope peak barely stands out from the next-best lag outside ±50 ms
+   (``separation = 1 - second / first`` below 0.3). Measured on rendered scenes: 0.85–0.99
+   for videos of one scene, 0.16–0.49 for unrelated ones; below ``min_confidence`` (0.65)
+   the audio does not agree and :class:`SyncError` is raised, naming the video, instead
+   of returning a wrong offset.
 
 Manual offsets (``manual_offsets={name: seconds}``) override the audio; a video without an
 audio track needs one.
@@ -47,6 +49,7 @@ HOP_S = 0.0025
 WIN_S = 0.010
 REFINE_STEPS = 3
 SEPARATION_S = 0.05
+SEPARATION_OK = 0.3  # envelope peak separation above which it does not lower confidence
 
 
 class SyncError(ValueError):
@@ -153,9 +156,8 @@ def _pair(ref: _Track, other: _Track) -> tuple[float, float]:
         return 0.0, 0.0
     c = signal.correlate(a, b, mode="full", method="fft")
     lags = signal.correlation_lags(len(a), len(b), mode="full")
-    # normalise by the overlap so that partial overlaps are not favoured or penalised
+    # lags with at least 20 % overlap of the shorter track
     overlap = np.minimum(len(a), lags + len(b)) - np.maximum(0, lags)
-    c = c / np.sqrt(np.maximum(overlap, 1) * 1.0)
     ok = overlap >= min(len(a), len(b)) * 0.2
     c = np.where(ok, c, -np.inf)
     i = int(np.argmax(c))
@@ -192,7 +194,8 @@ def _pair(ref: _Track, other: _Track) -> tuple[float, float]:
             frac = float(np.clip(0.5 * (r[j - 1] - r[j + 1]) / den, -0.5, 0.5))
     lag = float(ls[j]) + frac
     ncc = _event_ncc(x, y, int(ls[j]), picks, rate)
-    return lag / rate, separation * max(ncc, 0.0)
+    # the waveform agreement decides; a barely distinguishable envelope peak lowers it
+    return lag / rate, max(ncc, 0.0) * min(1.0, separation / SEPARATION_OK)
 
 
 def _shared_onsets(
@@ -241,7 +244,7 @@ def synchronize(
     videos: Sequence[str | Path | Video],
     *,
     manual_offsets: Mapping[str, float] | None = None,
-    min_confidence: float = 0.5,
+    min_confidence: float = 0.65,
 ) -> SyncResult:
     """Offsets of ``videos`` on the common clock (the first video's first frame is 0).
 
