@@ -38,7 +38,7 @@ from typing import Any
 
 import numpy as np
 import numpy.typing as npt
-from scipy import signal
+from scipy import signal  # type: ignore[import-untyped]
 
 from socialcam._validate import FloatArray, check_float, readonly
 from socialcam.video import Video, open_video
@@ -261,11 +261,11 @@ def synchronize(
     opened: list[Video] = []
     vids: list[Video] = []
     try:
-        for v in videos:
-            if isinstance(v, Video):
-                vids.append(v)
+        for item in videos:
+            if isinstance(item, Video):
+                vids.append(item)
             else:
-                vid = open_video(v)
+                vid = open_video(item)
                 opened.append(vid)
                 vids.append(vid)
         names = tuple(v.info.name for v in vids)

@@ -270,7 +270,7 @@ class Video:
             return None
         if not gray:
             img = cv2.cvtColor(img, cv2.COLOR_BGR2RGB)
-        return img
+        return np.asarray(img, dtype=np.uint8)
 
     def frames(
         self,

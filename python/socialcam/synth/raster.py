@@ -197,7 +197,7 @@ class Renderer:
     )
 
     def __post_init__(self) -> None:
-        self._Kinv = np.linalg.inv(self.K)
+        self._Kinv = np.asarray(np.linalg.inv(self.K), dtype=np.float64)
         self._mips = [mip_pyramid(t) for t in self.textures]
         self._xs = np.arange(self.width, dtype=np.float32)
         self._ys = np.arange(self.height, dtype=np.float32)

@@ -861,7 +861,7 @@ def _yuv_frame(img: U8Image) -> Any:
     for plane, arr in zip(vf.planes, planes, strict=True):
         buf = np.zeros((plane.height, plane.line_size), np.uint8)
         buf[:, : arr.shape[1]] = arr
-        plane.update(buf)
+        plane.update(buf.tobytes())
     return vf
 
 
@@ -1029,7 +1029,9 @@ def render_scene(
             img = np.asarray(head_textures[w])
             if img.ndim != 3 or img.shape[2] != 3 or img.dtype != np.uint8:
                 raise ValueError("head_textures: expected RGB uint8 images (H, W, 3)")
-            tex.append(cv2.resize(img, (64, 80), interpolation=cv2.INTER_AREA))
+            tex.append(
+                np.asarray(cv2.resize(img, (64, 80), interpolation=cv2.INTER_AREA), np.uint8)
+            )
             front = len(tex) - 1
         head_tex.append([front, hair, hair, hair, hair])
     target_tex = [[new_tex(32, 32, 3 + k % 3)] * 5 for k in range(n_t)]
@@ -1049,7 +1051,7 @@ def render_scene(
     total = V * F
     bar = None
     if progress:
-        from tqdm.auto import tqdm
+        from tqdm.auto import tqdm  # type: ignore[import-untyped]
 
         bar = tqdm(total=total, desc="render", unit="frame")
     try:
@@ -1107,7 +1109,7 @@ def render_scene(
                     )
                     img = renderer.render(R[k], C[k], shell, static, renderer.prepare(dyn, 10.0))
                     if maps is not None:
-                        img = cv2.remap(
+                        img = cv2.remap(  # type: ignore[assignment]
                             img, maps[0], maps[1], cv2.INTER_LINEAR, borderMode=cv2.BORDER_REPLICATE
                         )
                     if bar is not None:
@@ -1147,21 +1149,31 @@ def render_scene(
     return RenderedScene(tuple(videos), truth_path, truth, room, time.perf_counter() - t_wall)
 
 
+def shipped_scene() -> Path:
+    """The folder of the rendered scene shipped with socialcam (``SHIPPED_SCENE``: 4
+    wearers × 8 s, 640×480, 30 fps): ``wearer0.mp4`` … ``wearer3.mp4``, ``truth.npz``,
+    ``truth.json``. Regenerate with ``python -m socialcam.synth.render --ship``."""
+    import socialcam.data
+
+    return Path(socialcam.data.__file__).parent / "scene"
+
+
 def _main(argv: Sequence[str] | None = None) -> int:
     import argparse
+    import sys
 
     ap = argparse.ArgumentParser(prog="python -m socialcam.synth.render")
     ap.add_argument(
         "--ship", action="store_true", help="regenerate the scene shipped in socialcam/data/scene/"
     )
-    ap.add_argument("--out", default=None)
+    ap.add_argument("--out", default=None, help="write the shipped scene there instead")
     args = ap.parse_args(argv)
     if args.ship:
-        import socialcam.data
-
-        dest = Path(socialcam.data.__file__).parent / "scene"
-        res = render_scene(dest, **SHIPPED_SCENE)
+        dest = shipped_scene() if args.out is None else Path(args.out)
+        res = render_scene(dest, **SHIPPED_SCENE, progress=sys.stderr.isatty())
         print(f"wrote {len(res.videos)} videos to {dest} in {res.render_seconds:.1f} s")
+    else:
+        ap.print_help()
     return 0
 
 
@@ -1172,7 +1184,7 @@ SHIPPED_SCENE: dict[str, Any] = {
     "fps": 30.0,
     "size": (640, 480),
     "seed": 2026,
-    "crf": 23,
+    "crf": 26,
 }
 
 
