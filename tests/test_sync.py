@@ -173,3 +173,21 @@ def test_a_loud_sound_heard_by_one_wearer_never_gives_a_confident_wrong_offset(s
         o, c = _pair(_track("a", xa, rate, rate), _track("b", xb, rate, rate))
         wrong = abs(o - scene.truth.offsets[1]) > 1e-3
         assert not (wrong and c >= 0.65), (seed, o, c)
+
+
+def test_inconsistent_pairs_raise(scenes, monkeypatch):
+    # with three videos every pair is measured; one pair made 20 ms wrong must be refused
+    import socialcam.sync as S
+
+    real = S._pair
+    calls = []
+
+    def pair(a, b):
+        o, c = real(a, b)
+        calls.append((a.name, b.name))
+        return (o + 0.02, c) if (a.name, b.name) == ("wearer1", "wearer2") else (o, c)
+
+    monkeypatch.setattr(S, "_pair", pair)
+    with pytest.raises(SyncError, match=r"wearer\d, wearer\d: .*disagrees"):
+        synchronize(scenes[0].videos)
+    assert ("wearer1", "wearer2") in calls

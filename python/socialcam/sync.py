@@ -49,6 +49,7 @@ HOP_S = 0.0025
 WIN_S = 0.010
 REFINE_STEPS = 3
 SEPARATION_S = 0.05
+MAX_RESIDUAL = 0.002  # s: pairwise offsets must agree with the joint solution
 SEPARATION_OK = 0.3  # envelope peak separation above which it does not lower confidence
 
 
@@ -375,8 +376,16 @@ def _solve(
             # placed through other videos only: confidence of its best pair
             cout[v] = max(c for (a, b), (_, c) in pairs.items() if v in (a, b))
     res = np.zeros(len(out))
+    worst = (0.0, 0, 0)
     for a, b, o, _c in good:
         d = abs(out[b] - out[a] - o)
         res[a] = max(res[a], d)
         res[b] = max(res[b], d)
+        worst = max(worst, (d, a, b))
+    if worst[0] > MAX_RESIDUAL:
+        d, a, b = worst
+        raise SyncError(
+            f"{names[a]}, {names[b]}: their audio offset disagrees by {1e3 * d:.1f} ms with "
+            "the offsets through the other videos; pass manual_offsets for the one that is wrong"
+        )
     return out, cout, res

@@ -954,7 +954,7 @@ def render_scene(
     """
     out = Path(out_dir)
     V = check_int(n_wearers, "n_wearers", min=1, max=8)
-    dur = check_float(duration, "duration", min=0.2, max=3600.0)
+    dur = check_float(duration, "duration", min=0.2, max=600.0)  # audio is built in memory
     fps_ = check_float(fps, "fps", min=1.0, max=240.0)
     if not (isinstance(size, (tuple, list)) and len(size) == 2):
         raise ValueError(f"size: expected (width, height), got {size!r}")
