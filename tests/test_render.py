@@ -310,3 +310,19 @@ def test_head_texture_hook_puts_an_image_on_the_heads(tmp_path):
 def test_bad_arguments(tmp_path, kw, match):
     with pytest.raises(ValueError, match=match):
         render_scene(tmp_path, **{"duration": 0.2, "size": (64, 48), "progress": False, **kw})
+
+
+def test_without_calibration_nobody_fixates_the_calibration_point(tmp_path):
+    s = render_scene(
+        tmp_path,
+        n_wearers=2,
+        duration=1.0,
+        size=(64, 48),
+        seed=1,
+        calibration=False,
+        audio=False,
+        progress=False,
+    )
+    assert s.truth.calibration == ()
+    assert all((t != CALIBRATION).all() for t in s.truth.target_of)
+    assert s.truth.claps.shape == (0,)

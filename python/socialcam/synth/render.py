@@ -556,10 +556,10 @@ def _plan_motion(
                 regard[sl, v] = _wall_point(room, rng)
             k += n
         c0, c1 = calib[v]
-        inside = (t >= c0) & (t < c1)
-        code[inside, v] = CALIBRATION
-        # the wearer turns to the point before the segment starts (pursuit settles)
-        regard[(t >= c0 - 1.0) & (t < c1), v] = calib_pts[v]
+        if c1 > c0:
+            code[(t >= c0) & (t < c1), v] = CALIBRATION
+            # the wearer turns to the point before the segment starts (pursuit settles)
+            regard[(t >= c0 - 1.0) & (t < c1), v] = calib_pts[v]
     u = regard - eyes
     u /= np.linalg.norm(u, axis=-1, keepdims=True)
     # --- head: rate-limited smooth pursuit of the true gaze after a change of target (the
