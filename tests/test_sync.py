@@ -7,7 +7,7 @@ import json
 import numpy as np
 import pytest
 
-from socialcam.sync import SyncError, _pair, _track, synchronize
+from socialcam.sync import MIN_CONFIDENCE, SyncError, _pair, _track, synchronize
 from socialcam.synth.render import render_scene
 from socialcam.video import open_video
 
@@ -172,7 +172,7 @@ def test_a_loud_sound_heard_by_one_wearer_never_gives_a_confident_wrong_offset(s
         xb[i0 : i0 + n] += (3.0 * env * rng.normal(size=n)).astype(np.float32)
         o, c = _pair(_track("a", xa, rate, rate), _track("b", xb, rate, rate))
         wrong = abs(o - scene.truth.offsets[1]) > 1e-3
-        assert not (wrong and c >= 0.65), (seed, o, c)
+        assert not (wrong and c >= MIN_CONFIDENCE), (seed, o, c)
 
 
 def test_inconsistent_pairs_raise(scenes, monkeypatch):
