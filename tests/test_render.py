@@ -326,3 +326,15 @@ def test_without_calibration_nobody_fixates_the_calibration_point(tmp_path):
     assert s.truth.calibration == ()
     assert all((t != CALIBRATION).all() for t in s.truth.target_of)
     assert s.truth.claps.shape == (0,)
+
+
+def test_an_interrupted_render_leaves_no_half_written_video(tmp_path, monkeypatch):
+    import socialcam.synth.render as R
+
+    def boom(*args, **kwargs):
+        raise KeyboardInterrupt
+
+    monkeypatch.setattr(R, "_yuv_frame", boom)
+    with pytest.raises(KeyboardInterrupt):
+        render_scene(tmp_path, n_wearers=1, duration=0.2, size=(64, 48), progress=False)
+    assert list(tmp_path.glob("*.mp4")) == []

@@ -875,9 +875,26 @@ def _write_video(
     audio: npt.NDArray[np.float32] | None,
     crf: int,
 ) -> None:
+    tmp = path.with_name(path.stem + ".tmp" + path.suffix)
+    try:
+        _encode(tmp, frames, fps, width, height, audio, crf)
+    except BaseException:  # Ctrl-C or an error: no half-written file is left behind
+        tmp.unlink(missing_ok=True)
+        raise
+    os.replace(tmp, path)
+
+
+def _encode(
+    tmp: Path,
+    frames: Callable[[], Any],
+    fps: float,
+    width: int,
+    height: int,
+    audio: npt.NDArray[np.float32] | None,
+    crf: int,
+) -> None:
     import av
 
-    tmp = path.with_name(path.stem + ".tmp" + path.suffix)
     rate = _fps_fraction(fps)
     with av.open(str(tmp), mode="w") as out:
         vs = out.add_stream("libx264", rate=rate)
@@ -912,7 +929,6 @@ def _write_video(
                 out.mux(pkt)
         for pkt in vs.encode(None):
             out.mux(pkt)
-    os.replace(tmp, path)
 
 
 # ----------------------------------------------------------------------------- main
