@@ -355,5 +355,8 @@ def test_options_results_and_json():
     truth = scene.inattentive.ravel()
     assert (b.flags & truth).sum() >= 0.8 * (a.flags & truth).sum()
     cv = cross_validate_gaze(frames, 1, "rbf", times=scene.times)
-    for obj in (field, a, cv):
-        json.dumps(obj.to_dict())
+    # to_dict() is plain JSON and keeps the values.
+    d = json.loads(json.dumps(field.to_dict()))
+    np.testing.assert_allclose(np.array(d["positions"], dtype=float), field.positions)
+    assert json.loads(json.dumps(a.to_dict()))["frame"] == a.frame.tolist()
+    np.testing.assert_allclose(json.loads(json.dumps(cv.to_dict()))["errors"], cv.errors)
