@@ -60,6 +60,9 @@ def test_shared_K_broadcasts():
     cams = _rig()
     one = sc.Cameras(cams.K[0], cams.R, cams.C)
     assert one.K.shape == (4, 3, 3)
+    np.testing.assert_array_equal(one.K, np.broadcast_to(cams.K[0], (4, 3, 3)))
+    X = synth.random_points(5, seed=2)
+    np.testing.assert_allclose(one.project(X), cams.project(X), rtol=1e-12)
 
 
 @pytest.mark.parametrize(

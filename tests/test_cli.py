@@ -4,7 +4,6 @@ import json
 import subprocess
 import sys
 
-import numpy as np
 import pytest
 
 from socialcam.cli import main
@@ -25,7 +24,8 @@ def test_demo_writes_report_and_recovers_the_scene(tmp_path, capsys):
     assert st["social_charges"]["charge_error_cm_median"] < 20
     gf = st["gaze_field"]
     assert gf["leave_one_out_deg_median"] < gf["rbf_deg_median"]
-    assert np.isfinite(st["articulated"]["error_mm_median"])
+    # Measured 46.8 mm at seed 0 (seeds 1 and 2: 47.8 and 296 mm); a bound, not only finite.
+    assert st["articulated"]["error_mm_median"] < 100.0
     assert "report written" in capsys.readouterr().out
 
 

@@ -63,6 +63,73 @@ def test_selective_field_points_to_one_charge_not_between():
     assert d[0, 0] < -0.9 and d[1, 0] > 0.9
 
 
+def _two_close_targets(seed: int, sep: float = 1.0, h: float = 0.05):
+    """One frame: 12 people on a 2 m circle, alternately looking at two targets ``sep``
+    metres apart (1 m above the floor), gaze drawn from the Sec 3.1 model with bandwidth
+    ``h``. Returns ``(p, v, group, targets)``."""
+    rng = np.random.default_rng(seed)
+    targets = np.array([[-sep / 2, 0.0, 1.0], [sep / 2, 0.0, 1.0]])
+    a = 2 * np.pi * np.arange(12) / 12 + rng.uniform(0, 0.2, 12)
+    p = np.c_[2.0 * np.cos(a), 2.0 * np.sin(a), np.full(12, 1.6)]
+    group = np.arange(12) % 2
+    v = primary_from_true(targets[group] - p, h, rng)
+    return p, v, group, targets
+
+
+def test_em_iterations_separate_two_nearby_charges():
+    """The EM as a stage (Eq 7.11–7.12): two targets 1 m apart, both charges started
+    between them (56 cm off), so the first memberships are nearly even and the charges
+    separate over the iterations. Over 20 seeds (measured): the converged EM is as
+    accurate as the intersection of each group with the true memberships (median ratio
+    1.0006, worst 1.51), 8× better than its start (median 7.0 vs 56 cm), while one
+    iteration, or stopping once the charges move less than 0.5 m, leaves 48 cm; the mean
+    signed error is within 2.1 standard errors (0.7 cm) of zero on every axis; the median
+    ML κ is 1.33 / h² (few rays: the fit absorbs part of the noise)."""
+    h = 0.05
+    init = np.array([[[0.0, 0.3, 1.2], [0.1, -0.3, 0.9]]])
+    em, oracle, start, signed, kappa, converged = [], [], [], [], [], []
+    for seed in range(20):
+        p, v, group, targets = _two_close_targets(seed, h=h)
+        field = GazeField.fit([(p, v)], n_charges=2, init=init)
+        converged.append(bool(field.converged.all()))
+        c = np.array(field.positions[0])
+        if (
+            np.linalg.norm(c[::-1] - targets, axis=1).sum()
+            < np.linalg.norm(c - targets, axis=1).sum()
+        ):
+            c = c[::-1]
+        em.append(np.linalg.norm(c - targets, axis=1).mean())
+        signed.append(c - targets)
+        kappa.append(field.kappa[0])
+        start.append(np.linalg.norm(init[0] - targets, axis=1).mean())
+        # Oracle: Eq 7.12 on each group alone (memberships known), started at the truth.
+        oracle.append(
+            np.mean(
+                [
+                    np.linalg.norm(
+                        GazeField.fit(
+                            [(p[group == g], v[group == g])],
+                            n_charges=1,
+                            init=targets[g][None, None],
+                        ).positions[0, 0]
+                        - targets[g]
+                    )
+                    for g in (0, 1)
+                ]
+            )
+        )
+    em_, oracle_ = np.array(em), np.array(oracle)
+    ratio = em_ / oracle_
+    assert np.median(ratio) < 1.1 and ratio.max() < 2.0, ratio
+    assert np.median(em_) < 0.25 * np.median(start), (np.median(em_), np.median(start))
+    assert em_.max() < 0.2, em_.max()  # measured worst 13.4 cm
+    s = np.array(signed).reshape(-1, 3)
+    se = s.std(axis=0, ddof=1) / np.sqrt(len(s))
+    assert (np.abs(s.mean(axis=0)) < 4 * se).all(), (s.mean(axis=0), se)
+    assert 1.0 < np.median(kappa) * h**2 < 1.8, np.median(kappa) * h**2
+    assert all(converged), converged
+
+
 def test_mafia_anomalies_precision_and_recall():
     scene = mafia(n_frames=150, seed=3)
     frames = scene.ray_frames()
@@ -73,7 +140,9 @@ def test_mafia_anomalies_precision_and_recall():
     print(
         f"mafia: charge error median {np.median(err) * 100:.1f} cm, 90th percentile {np.percentile(err, 90) * 100:.1f} cm"
     )
-    assert np.median(err) < 0.1 and np.percentile(err, 90) < 0.2
+    # Measured (seed 3): median 5.3 cm, 90th percentile 10.9 cm; seeds 4 and 5 give 7.4 and
+    # 8.7 cm medians.
+    assert np.median(err) < 0.075 and np.percentile(err, 90) < 0.15
     found = detect_anomalies(frames, field, threshold=25.0)
     truth = scene.inattentive.ravel()
     flags = found.flags
@@ -286,5 +355,8 @@ def test_options_results_and_json():
     truth = scene.inattentive.ravel()
     assert (b.flags & truth).sum() >= 0.8 * (a.flags & truth).sum()
     cv = cross_validate_gaze(frames, 1, "rbf", times=scene.times)
-    for obj in (field, a, cv):
-        json.dumps(obj.to_dict())
+    # to_dict() is plain JSON and keeps the values.
+    d = json.loads(json.dumps(field.to_dict()))
+    np.testing.assert_allclose(np.array(d["positions"], dtype=float), field.positions)
+    assert json.loads(json.dumps(a.to_dict()))["frame"] == a.frame.tolist()
+    np.testing.assert_allclose(json.loads(json.dumps(cv.to_dict()))["errors"], cv.errors)

@@ -560,7 +560,16 @@ fn init_finds_exact_intersections() {
     for (i, &j) in perm.iter().enumerate() {
         assert!((init[j] - s.charges[i]).norm() < 1e-9);
     }
-    // Three charges from two groups: the third repeats a useful candidate, still finite.
+    // Three charges from two groups: the two intersections are among them, and the third
+    // is a finite point (a repeated candidate).
     let init3 = init_charges(&s.rays, 3, 0.1).unwrap();
     assert_eq!(init3.len(), 3);
+    assert!(init3.iter().all(|x| x.iter().all(|v| v.is_finite())));
+    for c in &s.charges {
+        let nearest = init3
+            .iter()
+            .map(|x| (x - c).norm())
+            .fold(f64::INFINITY, f64::min);
+        assert!(nearest < 1e-9, "{nearest}");
+    }
 }
