@@ -199,9 +199,14 @@ OTHERS: dict[str, tuple[Callable[..., Any], dict[str, Any]]] = {
     ),
     "saliency_grid": (
         sc.saliency_grid,
-        dict(rays=sc.GazeRays(EYES, DIRS), lo=(-1, -1, 0), hi=(1, 1, 2), shape=(4, 4, 3)),
+        dict(
+            rays=sc.GazeRays(EYES, DIRS, np.full(5, 0.1)),
+            lo=(-1, -1, 0),
+            hi=(1, 1, 2),
+            shape=(4, 4, 3),
+        ),
     ),
-    "find_charges": (sc.find_charges, dict(rays=sc.GazeRays(EYES, DIRS), seed=0)),
+    "find_charges": (sc.find_charges, dict(rays=sc.GazeRays(EYES, DIRS, np.full(5, 0.1)), seed=0)),
 }
 
 
@@ -219,7 +224,9 @@ def _probe(fn: Callable[..., Any], base: dict[str, Any]) -> list[str]:
             except ValueError as e:
                 if name not in str(e) and not (name == "frames" and "frames[" in str(e)):
                     problems.append(f"{name}={bad!r}: ValueError not naming it: {e}")
-            except Exception as e:
+            except (KeyboardInterrupt, SystemExit):
+                raise
+            except BaseException as e:  # pyo3's PanicException is a BaseException
                 problems.append(f"{name}={bad!r}: {type(e).__name__}: {e}")
     return problems
 
@@ -288,9 +295,24 @@ def test_options_are_keyword_only(fn, first_option):
     assert param.kind is inspect.Parameter.KEYWORD_ONLY
 
 
+OLD_NAMES = {"max_iterations", "filter", "X", "reprojection_rms", "observed"}
+#: Owned by i12-artic (articulated.py): X → points, reprojection_rms → rms there.
+OTHER_BRANCH_NAMES = {"ArticulatedTrajectory", "SkeletonReconstruction"}
+
+
+@pytest.mark.xfail(strict=True, reason="i12-artic: X → points, reprojection_rms → rms")
+def test_articulated_results_use_the_new_names():
+    fields = {
+        f.name
+        for c in (sc.ArticulatedTrajectory, sc.SkeletonReconstruction)
+        for f in dataclasses.fields(c)
+    }
+    assert not fields & OLD_NAMES
+
+
 def test_no_parameter_uses_the_old_names():
-    old = {"max_iterations", "filter", "X", "reprojection_rms", "observed"}
-    for name in sc.__all__:
+    old = OLD_NAMES
+    for name in sorted(set(sc.__all__) - OTHER_BRANCH_NAMES):
         obj = getattr(sc, name)
         fns = [obj] if callable(obj) else []
         if isinstance(obj, type):

@@ -20,7 +20,9 @@ WORKER = Path(__file__).with_name("_fuzz_worker.py")
 EXAMPLES = 120
 
 # Functions that still crash, each with its owner's reason; strict, so fixing it shows.
-KNOWN_CRASHES: dict[str, str] = {}
+KNOWN_CRASHES: dict[str, str] = {
+    "find_charges": "i13-charges: seeds_per_ray=10**12 aborts (allocation of 24 TB)",
+}
 
 
 def _functions() -> list[str]:

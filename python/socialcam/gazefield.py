@@ -167,7 +167,12 @@ def _frame_parts(f: object, k: int) -> tuple[Any, Any, Any, Any]:
 
 
 def _flatten(frames: Sequence[object], default_h: float = 0.1) -> _Flat:
-    if isinstance(frames, (str, bytes)) or len(frames) == 0:
+    if isinstance(frames, (str, bytes)) or not isinstance(frames, Sequence):
+        raise ValueError(
+            f"frames: expected a sequence of frames (GazeRays or (p, v) tuples), got "
+            f"{type(frames).__name__}"
+        )
+    if len(frames) == 0:
         raise ValueError("frames: need at least one frame")
     ps, vs, hs, ids = [], [], [], []
     counts = []
@@ -227,6 +232,13 @@ def _int_array(value: object, name: str) -> IntArray:
     if np.issubdtype(a.dtype, np.unsignedinteger) and int(a.max()) > _I64_MAX:
         raise ValueError(f"{name}: values must fit in int64")
     return a.astype(np.int64)
+
+
+def _per_row(a: FloatArray, name: str, n: int) -> FloatArray:
+    """A number or an ``(n,)`` array, as ``(n,)``."""
+    if a.ndim > 1 or (a.ndim == 1 and a.shape[0] not in (1, n)):
+        raise ValueError(f"{name}: expected a number or shape ({n},), got {a.shape}")
+    return np.broadcast_to(a, (n,))
 
 
 def _times(times: npt.ArrayLike | None, n: int) -> FloatArray:
@@ -448,6 +460,7 @@ class GazeField:
         The field is only known over the fitted frames: a time more than half a frame
         spacing before the first frame or after the last raises ``ValueError`` (it used to
         be clamped silently to the nearest end)."""
+        n = check_int(n, "n", min=0)
         if t is None:
             if len(self.times) != 1:
                 raise ValueError("t: required for a field over several frames")
@@ -489,7 +502,9 @@ class GazeField:
         """
         pts = as_float_array(points, "points")
         single = pts.ndim == 1
-        pts = as_float_array(pts.reshape(-1, 3) if single else pts, "points", (None, 3))
+        if single and pts.shape != (3,):
+            raise ValueError(f"points: expected shape (3,) or (M, 3), got {pts.shape}")
+        pts = as_float_array(pts.reshape(1, 3) if single else pts, "points", (None, 3))
         fr = self.frame_index(t, len(pts))
         out = _core.gaze_predict(*self._state(), fr, pts)
         return out[0] if single else out
@@ -923,8 +938,8 @@ def fuse_gaze(
     """
     a = as_float_array(measured, "measured", (None, 3))
     b = as_float_array(predicted, "predicted", (len(a), 3), allow_nan=True)
-    ka = np.broadcast_to(as_float_array(kappa_measured, "kappa_measured"), (len(a),))
-    kb = np.broadcast_to(as_float_array(kappa_field, "kappa_field", allow_nan=True), (len(a),))
+    ka = _per_row(as_float_array(kappa_measured, "kappa_measured"), "kappa_measured", len(a))
+    kb = _per_row(as_float_array(kappa_field, "kappa_field", allow_nan=True), "kappa_field", len(a))
     if (ka <= 0).any() or (np.nan_to_num(kb, nan=1.0) <= 0).any():
         raise ValueError("kappa_measured, kappa_field: concentrations must be > 0")
     for name, arr in (("measured", a), ("predicted", b)):
