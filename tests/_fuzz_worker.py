@@ -215,31 +215,21 @@ def _array_variants(a: np.ndarray) -> list[Callable[[], Any]]:
         lambda: "abc",
         lambda: 3.0,
     ]
+
+    def with_value(v: float) -> Callable[[], Any]:
+        def make() -> np.ndarray:
+            b = a.copy()
+            if b.size:
+                b.flat[rng.integers(b.size)] = v
+            return b
+
+        return make
+
     if a.dtype.kind == "f":
-
-        def with_value(v: float) -> Callable[[], Any]:
-            def make() -> np.ndarray:
-                b = a.copy()
-                if b.size:
-                    b.flat[rng.integers(b.size)] = v
-                return b
-
-            return make
-
         out += [with_value(x) for x in (np.nan, np.inf, -np.inf, 1e300, -1e300, 0.0, 1e-300)]
         out += [lambda: a * 1e12, lambda: np.zeros_like(a), lambda: -a]
     elif a.dtype.kind == "i":
-
-        def with_int(v: int) -> Callable[[], Any]:
-            def make() -> np.ndarray:
-                b = a.copy()
-                if b.size:
-                    b.flat[rng.integers(b.size)] = v
-                return b
-
-            return make
-
-        out += [with_int(x) for x in (-1, 2**62, 2**63 - 1, -(2**63), 10**12, 0)]
+        out += [with_value(x) for x in (-1, 2**62, 2**63 - 1, -(2**63), 10**12, 0)]
         out += [lambda: a.astype(np.uint64), lambda: a.astype(float) + 0.5]
     return out
 

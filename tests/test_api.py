@@ -15,6 +15,7 @@ from typing import Any
 
 import numpy as np
 import pytest
+from _scenes import ring
 
 import socialcam as sc
 from socialcam import gazefield as gf
@@ -35,20 +36,7 @@ BAD: list[Any] = [
 ]
 
 
-def _ring(f: int) -> Cameras:
-    a = np.linspace(0, 2 * np.pi, f, endpoint=False)
-    C = np.c_[5 * np.cos(a), 5 * np.sin(a), 1.5 + 0.3 * np.sin(3 * a)]
-    Rs = []
-    for c in C:
-        z = -c / np.linalg.norm(c)
-        x = np.cross([0.0, 0.0, 1.0], z)
-        x /= np.linalg.norm(x)
-        Rs.append([x, np.cross(z, x), z])
-    K = np.array([[600.0, 0, 320], [0, 600, 240], [0, 0, 1]])
-    return Cameras(K, np.array(Rs), C, times=np.arange(f) * 0.1)
-
-
-CAMS = _ring(12)
+CAMS = ring(12)
 T = CAMS.times
 TRAJ = np.c_[np.sin(T), np.cos(T), 0.1 * T]
 PIX_TRAJ = CAMS.project_trajectory(TRAJ)

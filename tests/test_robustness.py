@@ -13,27 +13,12 @@ from typing import Any
 
 import numpy as np
 import pytest
+from _scenes import ring
 
 import socialcam as sc
 from socialcam import _core, io
-from socialcam.camera import Cameras
 
 # ----------------------------------------------------------------------------- helpers
-
-
-def ring(f: int, *, radius: float = 5.0, seed: int = 0) -> Cameras:
-    """``f`` cameras on a wobbling ring looking at the origin, times 0.1 s apart."""
-    rng = np.random.default_rng(seed)
-    a = np.linspace(0, 2 * np.pi, f, endpoint=False) + rng.normal(scale=0.01, size=f)
-    C = np.c_[radius * np.cos(a), radius * np.sin(a), 1.5 + 0.3 * np.sin(5 * a)]
-    Rs = []
-    for c in C:
-        z = -c / np.linalg.norm(c)
-        x = np.cross([0.0, 0.0, 1.0], z)
-        x /= np.linalg.norm(x)
-        Rs.append([x, np.cross(z, x), z])
-    K = np.array([[600.0, 0, 320], [0, 600, 240], [0, 0, 1]])
-    return Cameras(K, np.array(Rs), C, times=np.arange(f) * 0.1)
 
 
 def gaze_frames(n_frames: int, n_people: int = 6, seed: int = 0) -> list[tuple[Any, Any]]:
@@ -66,7 +51,9 @@ def interrupted(fn: Callable[[], object], delay: float = 0.5) -> float:
     finally:
         timer.cancel()
     assert sent, "the call returned before the interrupt was sent: make it longer"
-    return time.perf_counter() - sent[0]
+    latency = time.perf_counter() - sent[0]
+    print(f"Ctrl-C latency: {latency * 1e3:.0f} ms")
+    return latency
 
 
 #: Ctrl-C must stop a call within this many seconds (measured: < 0.1 s on a loaded

@@ -32,7 +32,6 @@ import numpy as np
 import numpy.typing as npt
 
 from socialcam import _core
-from socialcam.errors import ConvergenceError
 from socialcam._validate import (
     FloatArray,
     apply_overrides,
@@ -43,6 +42,7 @@ from socialcam._validate import (
     check_seed,
     readonly,
 )
+from socialcam.errors import ConvergenceError
 
 IntArray = npt.NDArray[np.int64]
 

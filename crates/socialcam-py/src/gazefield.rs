@@ -211,7 +211,11 @@ fn gaze_init<'py>(
     }
     let imax = wins.iter().map(|w| w.n_charges).max().unwrap_or(0);
     let nf = frames.len();
-    map(socialcore::error::ensure_alloc("windows", &[nf, imax, 3], 8))?;
+    map(socialcore::error::ensure_alloc(
+        "windows",
+        &[nf, imax, 3],
+        8,
+    ))?;
     let rows_w = detach(py, || {
         wins.par_iter()
             .map(|w| {
@@ -288,8 +292,9 @@ fn gaze_em<'py>(
     offsets: PyReadonlyArray1<'py, i64>,
     windows: PyReadonlyArray2<'py, i64>,
     init: PyReadonlyArray3<'py, f64>,
-    options: PyGazeEmOptions,
+    options: Bound<'py, PyAny>,
 ) -> PyResult<EmOut<'py>> {
+    let options: PyGazeEmOptions = crate::convert::options(&options, "GazeFieldOptions")?;
     let frames = frames_of(&p, &v, Some(&members), &offsets)?;
     let wins = windows_of(&windows, frames.len())?;
     let init_rows = padded_rows(&init, "init")?;
@@ -363,8 +368,16 @@ fn gaze_em<'py>(
         .map(|m| m + 1)
         .max()
         .unwrap_or(0);
-    map(socialcore::error::ensure_alloc("windows", &[frames.len(), imax, 3], 8))?;
-    map(socialcore::error::ensure_alloc("members", &[wins.len(), n_members, imax], 8))?;
+    map(socialcore::error::ensure_alloc(
+        "windows",
+        &[frames.len(), imax, 3],
+        8,
+    ))?;
+    map(socialcore::error::ensure_alloc(
+        "members",
+        &[wins.len(), n_members, imax],
+        8,
+    ))?;
     let job_list: Vec<gf::WindowJob> = jobs.iter().map(|(_, j)| j.clone()).collect();
     let fits = detach(py, || gf::em_windows(&frames, &job_list, &opts))?;
     let nf = frames.len();

@@ -219,11 +219,12 @@ fn reconstruct_trajectories<'py>(
     c: PyReadonlyArray2<'py, f64>,
     times: PyReadonlyArray1<'py, f64>,
     x: PyReadonlyArray3<'py, f64>,
-    options: PyTrajectoryOptions,
+    options: Bound<'py, PyAny>,
     keep_covariance: bool,
     strict: bool,
 ) -> PyResult<Bound<'py, PyDict>> {
-    let opts = self::options(&options, keep_covariance)?;
+    let o: PyTrajectoryOptions = crate::convert::options(&options, "TrajectoryOptions")?;
+    let opts = self::options(&o, keep_covariance)?;
     let fr = frames(&k_intr, &r, &c, &times)?;
     let (flat, n) = pixels(&x, fr.len())?;
     let results = detach(py, || {

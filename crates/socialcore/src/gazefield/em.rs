@@ -144,7 +144,7 @@ impl EmOptions {
     pub fn validate(&self) -> Result<()> {
         validate_kappa(self.kappa.initial())?;
         if !(self.tolerance.is_finite() && self.tolerance > 0.0) {
-            return Err(Error::invalid("tolerance", "must be finite and > 0"));
+            return Err(Error::invalid("tol", "must be finite and > 0"));
         }
         if !(self.max_angle > 0.0 && self.max_angle < std::f64::consts::FRAC_PI_2) {
             return Err(Error::invalid("max_angle", "must lie in (0, pi/2) radians"));
