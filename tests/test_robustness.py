@@ -152,12 +152,27 @@ def test_ctrl_c_stops_trajectory_refinement():
 
 def test_ctrl_c_stops_gaze_field_em():
     frames = gaze_frames(3_000, n_people=8)
-    # A tiny tol and a huge cap: the EM would run for hours without the interrupt.
-    lat = interrupted(
-        lambda: sc.GazeField.fit(frames, n_charges=2, kappa=30.0, tol=1e-300, max_iter=10**9)
-    )
+    p = np.concatenate([f[0] for f in frames])
+    v = np.concatenate([f[1] for f in frames])
+    off = np.arange(0, 8 * 3_000 + 1, 8, dtype=np.int64)
+    members = np.tile(np.arange(8, dtype=np.int64), 3_000)
+    windows = np.array([[0, 3_000, 2]], dtype=np.int64)
+    init = _core.gaze_init(p, v, off, windows, 0.25)
+    # A tiny tol and a huge cap: the EM would run for hours without the interrupt. The
+    # kernel is called directly so that the signal lands inside the EM, not in the setup.
+    opts = sc.GazeFieldOptions(kappa=30.0, tol=1e-300, max_iter=10**9)
+    lat = interrupted(lambda: _core.gaze_em(p, v, members, off, windows, init, opts))
     assert lat < LATENCY
     assert sc.GazeField.fit(frames[:5], n_charges=1, kappa=30.0).converged.all()
+
+
+def test_ctrl_c_stops_gaze_field_fit():
+    frames = gaze_frames(3_000, n_people=8)
+    lat = interrupted(
+        lambda: sc.GazeField.fit(frames, n_charges=2, kappa=30.0, tol=1e-300, max_iter=10**9),
+        delay=3.0,
+    )
+    assert lat < LATENCY
 
 
 # ----------------------------------------------------------------------------- silent wrong answers
