@@ -1,10 +1,11 @@
 """Fuzzes one function of ``socialcam._core`` with extreme arguments (run in a subprocess by
 ``tests/test_fuzz_binding.py``, so that an abort fails a test instead of killing pytest).
 
-Usage: ``python tests/_fuzz_worker.py FUNCTION MAX_EXAMPLES``. Exit status 0: every call
-returned or raised an allowed exception; 1: a call raised a forbidden exception (printed);
-anything else (a signal): the process crashed — the last line of the log on stderr names
-the call.
+Usage: ``python tests/_fuzz_worker.py FUNCTION... MAX_EXAMPLES``. For each function it
+prints ``START name``, one ``CALL ...`` line per call, then ``DONE name ok`` (every call
+returned or raised an allowed exception) or ``DONE name fail`` (a forbidden exception,
+printed). A crash (a signal) leaves the last ``START`` unanswered, its last ``CALL`` line
+naming the input.
 
 The kernel is the contract here: every ``_core`` function must return or raise
 ``ValueError`` (including ``DegenerateError``), ``TypeError``/``OverflowError`` (PyO3's
@@ -313,13 +314,21 @@ def _short(v: Any) -> str:
 
 
 def main() -> int:
-    name, n = sys.argv[1], int(sys.argv[2])
+    """``FUNCTIONS... MAX_EXAMPLES``: fuzzes each function in turn, printing
+    ``DONE name ok|fail`` after each; a crash leaves the last ``START name`` unanswered."""
+    *names, n = sys.argv[1:]
     signal.signal(signal.SIGALRM, _alarm)
-    try:
-        return run(name, n)
-    except BaseException:  # a forbidden exception (PanicException is a BaseException)
-        traceback.print_exc()
-        return 1
+    status = 0
+    for name in names:
+        print(f"START {name}", file=sys.stderr, flush=True)
+        try:
+            run(name, int(n))
+            print(f"DONE {name} ok", file=sys.stderr, flush=True)
+        except BaseException:  # a forbidden exception (PanicException is a BaseException)
+            traceback.print_exc()
+            print(f"DONE {name} fail", file=sys.stderr, flush=True)
+            status = 1
+    return status
 
 
 if __name__ == "__main__":
