@@ -62,7 +62,7 @@ def main() -> None:
     cases = []
     for sk, P, cams, px in scenes:
         for j in range(1, len(sk.names)):
-            eta = sc.articulated_reconstructability(cams, P[:, sk.parents[j]], P[:, j], 8)
+            eta = sc.articulated_reconstructability(P[:, j], cams, P[:, sk.parents[j]], 8)
             rows.append((eta, run(sk, P, cams, px, j)))
             if eta > 1.25:
                 cases.append((sk, P, cams, px, j))

@@ -15,6 +15,7 @@ import time
 import numpy as np
 
 from socialcam import _core
+from socialcam.gazefield import GazeFieldOptions
 from socialcam.synth.people import primary_from_true
 
 KAPPA_MIN, KAPPA_MAX = 1e-8, 1e8
@@ -217,8 +218,9 @@ def main() -> None:
     kappa0 = 1 / 0.12**2
 
     t0 = time.perf_counter()
+    opts = GazeFieldOptions(kappa_init=kappa0, max_angle=MAX_ANGLE, max_iter=200, tol=1e-7)
     pos, _mag, kap, *_rest, iters, conv = _core.gaze_em(
-        pf, vf, members, offsets, windows, init, kappa_init=kappa0
+        pf, vf, members, offsets, windows, init, opts
     )
     t_rust = time.perf_counter() - t0
 

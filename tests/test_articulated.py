@@ -111,7 +111,7 @@ class Scene:
         self.k = 8
         self.eta = {
             j: sc.articulated_reconstructability(
-                self.cams, P[:, self.skeleton.parents[j]], P[:, j], self.k
+                P[:, j], self.cams, P[:, self.skeleton.parents[j]], self.k
             )
             for j in range(1, len(self.skeleton.names))
         }

@@ -143,7 +143,7 @@ def test_mafia_anomalies_precision_and_recall():
     # Measured (seed 3): median 5.3 cm, 90th percentile 10.9 cm; seeds 4 and 5 give 7.4 and
     # 8.7 cm medians.
     assert np.median(err) < 0.075 and np.percentile(err, 90) < 0.15
-    found = detect_anomalies(frames, field, threshold=25.0)
+    found = detect_anomalies(frames, field, threshold=np.deg2rad(25.0))
     truth = scene.inattentive.ravel()
     flags = found.flags
     tp = (flags & truth).sum()
@@ -274,8 +274,12 @@ def test_leave_k_out_field_beats_rbf():
     frames = sc.ray_frames()
     ratios, med = [], []
     for k in range(1, 7):
-        f = cross_validate_gaze(frames, k, "field", times=sc.times, n_splits=5, seed=k)
-        r = cross_validate_gaze(frames, k, "rbf", times=sc.times, n_splits=5, seed=k)
+        f = cross_validate_gaze(
+            frames, leave_out=k, method="field", times=sc.times, n_splits=5, seed=k
+        )
+        r = cross_validate_gaze(
+            frames, leave_out=k, method="rbf", times=sc.times, n_splits=5, seed=k
+        )
         ratios.append(r.mean / f.mean)
         med.append(np.median(r.errors) / np.median(f.errors))
         print(
@@ -308,10 +312,10 @@ def test_outlier_members_hurt_the_field_less_than_rbf():
     res = {}
     for name, fr in (("clean", clean), ("outliers", bad)):
         res[name, "field"] = cross_validate_gaze(
-            fr, 2, "field", times=sc.times, eligible=keep, n_splits=5
+            fr, leave_out=2, method="field", times=sc.times, eligible=keep, n_splits=5
         ).mean
         res[name, "rbf"] = cross_validate_gaze(
-            fr, 2, "rbf", times=sc.times, eligible=keep, n_splits=5
+            fr, leave_out=2, method="rbf", times=sc.times, eligible=keep, n_splits=5
         ).mean
     growth_field = res["outliers", "field"] - res["clean", "field"]
     growth_rbf = res["outliers", "rbf"] - res["clean", "rbf"]
@@ -330,14 +334,19 @@ def test_options_results_and_json():
     for filt in ("velocity", "acceleration"):
         for memb in ("window", "frame"):
             f = GazeField.fit(
-                frames, n_charges=1, lambda_g=2.0, filter=filt, membership=memb, times=scene.times
+                frames,
+                n_charges=1,
+                lambda_g=2.0,
+                temporal_filter=filt,
+                membership=memb,
+                times=scene.times,
             )
             err = np.linalg.norm(
                 f.positions[:, 0] - scene.faces[np.arange(40), scene.suspect], axis=1
             )
             assert np.median(err) < 0.1, (filt, memb)
-    with pytest.raises(ValueError, match="filter"):
-        GazeField.fit(frames, n_charges=1, filter="jerk")
+    with pytest.raises(ValueError, match="temporal_filter"):
+        GazeField.fit(frames, n_charges=1, temporal_filter="jerk")
     with pytest.raises(ValueError, match="membership"):
         GazeField.fit(frames, n_charges=1, membership="person")
     field = GazeField.fit(frames, n_charges=1, times=scene.times)
@@ -348,13 +357,13 @@ def test_options_results_and_json():
     )
     with pytest.raises(ValueError, match="t"):
         field.predict(x)
-    a = detect_anomalies(frames, field, threshold=25.0)
+    a = detect_anomalies(frames, field, threshold=np.deg2rad(25.0))
     b = detect_anomalies(frames, field, threshold=-2.0, kind="loglik")
     assert a.flags.any() and b.flags.any()
     # Log-density flags agree largely with angle flags on inattentive players.
     truth = scene.inattentive.ravel()
     assert (b.flags & truth).sum() >= 0.8 * (a.flags & truth).sum()
-    cv = cross_validate_gaze(frames, 1, "rbf", times=scene.times)
+    cv = cross_validate_gaze(frames, leave_out=1, method="rbf", times=scene.times)
     # to_dict() is plain JSON and keeps the values.
     d = json.loads(json.dumps(field.to_dict()))
     np.testing.assert_allclose(np.array(d["positions"], dtype=float), field.positions)

@@ -3,8 +3,9 @@
 Geometry and the thesis' solvers run in a Rust core (``socialcam._core``) with the GIL
 released; this package adds I/O, simulation, plots and the command line.
 
-Conventions (see DESIGN.md): metres, seconds, radians; float64 arrays; pinhole
-``P = K R [I | -C]`` with OpenCV pixel coordinates; NaN rows for missing observations.
+Conventions (see the README): metres, seconds, radians; float64 arrays; pinhole
+``P = K R [I | -C]`` with OpenCV pixel coordinates; NaN rows for missing observations;
+options keyword-only; bad input raises ``ValueError`` naming the argument.
 """
 
 from socialcam import mocap, sfm, synth
@@ -39,6 +40,7 @@ from socialcam.gazefield import (
     Anomalies,
     GazeCrossValidation,
     GazeField,
+    GazeFieldOptions,
     cross_validate_gaze,
     detect_anomalies,
     fuse_gaze,
@@ -55,6 +57,7 @@ from socialcam.geometry import (
 from socialcam.trajectory import (
     Trajectory,
     TrajectoryBatch,
+    TrajectoryOptions,
     reconstruct_trajectories,
     reconstruct_trajectory,
     reconstructability,
@@ -72,11 +75,13 @@ __all__ = [
     "GazeCalibration",
     "GazeCrossValidation",
     "GazeField",
+    "GazeFieldOptions",
     "GazeRays",
     "Skeleton",
     "SkeletonReconstruction",
     "Trajectory",
     "TrajectoryBatch",
+    "TrajectoryOptions",
     "TriangulationInfo",
     "__version__",
     "align_similarity",

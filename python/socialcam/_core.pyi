@@ -1,6 +1,9 @@
 """Type stubs for the Rust extension ``socialcam._core`` (hand-written; checked in CI by
 ``mypy.stubtest``). Use the public wrappers in :mod:`socialcam`; these are their kernels.
 
+Sizes: an output larger than 2 GiB is refused with ``ValueError`` naming the argument.
+Long calls run with the GIL released and stop on Ctrl-C (``KeyboardInterrupt``).
+
 Array conventions: float64, row-major; cameras as ``K (F,3,3)``, ``R (F,3,3)``
 world→camera, ``C (F,3)`` centres in metres; NaN pixel rows mean "not observed".
 """
@@ -9,6 +12,9 @@ from typing import Any, TypeAlias
 
 import numpy as np
 import numpy.typing as npt
+
+from socialcam.gazefield import GazeFieldOptions
+from socialcam.trajectory import TrajectoryOptions
 
 _F64: TypeAlias = npt.NDArray[np.float64]
 
@@ -33,7 +39,7 @@ def back_project(k: _F64, r: _F64, c: _F64, x: _F64) -> _F64:
     """Unit world ray directions ``(F,N,3)`` through pixels ``x (F,N,2)``."""
 
 def triangulate(
-    k: _F64, r: _F64, c: _F64, x: _F64, refine: bool = True, max_iterations: int = 50
+    k: _F64, r: _F64, c: _F64, x: _F64, refine: bool = True, max_iter: int = 50
 ) -> tuple[
     _F64,
     _F64,
@@ -65,21 +71,16 @@ def reconstruct_trajectories(
     c: _F64,
     times: _F64,
     x: _F64,
-    k: int | None = None,
-    folds: int = 5,
-    k_min: int = 1,
-    k_max: int | None = None,
-    cv_rule: str = "min",
-    refine: bool = True,
-    max_iterations: int = 100,
+    options: TrajectoryOptions,
     keep_covariance: bool = False,
     strict: bool = False,
 ) -> dict[str, Any]:
-    """Trajectories of ``x (N,F,2)`` from cameras with capture ``times (F,)``; ``k=None``
-    chooses K per point by cross validation (Eq 5.8). A dict of arrays: ``points (N,F,3)``,
+    """Trajectories of ``x (N,F,2)`` from cameras with capture ``times (F,)`` with the
+    options of a :class:`socialcam.trajectory.TrajectoryOptions` (``k="auto"`` chooses K per
+    point by cross validation, Eq 5.8). A dict of arrays: ``points (N,F,3)``,
     ``std (N,F,3)``, ``coeffs (N,Kmax,3)``, ``cv_error (N,Kcv)``, ``k``, ``rms``,
     ``rms_linear``, ``converged``, ``iterations``, ``rank``, ``cond``, ``sigma``,
-    ``observed`` ``(N,)``, ``covariance`` (list of ``(3k,3k)`` or ``None``), ``failures``
+    ``n_observed`` ``(N,)``, ``covariance`` (list of ``(3k,3k)`` or ``None``), ``failures``
     (list of ``str | None``) and ``span (t0, t1, n_norm)``. ``strict=True`` raises the first
     failure."""
 
@@ -178,15 +179,7 @@ def gaze_em(
     offsets: npt.NDArray[np.int64],
     windows: npt.NDArray[np.int64],
     init: _F64,
-    kappa: float | None = None,
-    kappa_init: float = 10.0,
-    max_iterations: int = 200,
-    tolerance: float = 1e-7,
-    max_angle: float = 0.5235987755982988,
-    inner_iterations: int = 5,
-    lambda_g: float = 0.0,
-    filter: str = "velocity",
-    membership: str = "window",
+    options: GazeFieldOptions,
 ) -> tuple[
     _F64,
     _F64,
@@ -197,9 +190,10 @@ def gaze_em(
     npt.NDArray[np.int64],
     npt.NDArray[np.bool_],
 ]:
-    """Time-windowed EM (Eq 7.10–7.14): positions ``(F,I,3)``, magnitudes ``(F,I)``, κ
-    ``(W,)``, memberships ``(W,J,I)``, responsibilities ``(N,I)``, log-likelihood ``(W,)``,
-    iterations ``(W,)``, converged ``(W,)``."""
+    """Time-windowed EM (Eq 7.10–7.14) with the EM fields of a
+    :class:`socialcam.gazefield.GazeFieldOptions`: positions ``(F,I,3)``, magnitudes
+    ``(F,I)``, κ ``(W,)``, memberships ``(W,J,I)``, responsibilities ``(N,I)``,
+    log-likelihood ``(W,)``, iterations ``(W,)``, converged ``(W,)``."""
 
 def gaze_predict(
     positions: _F64,

@@ -2,7 +2,9 @@
 
 from __future__ import annotations
 
+import dataclasses
 from collections.abc import Sequence
+from typing import TypeVar
 
 import numpy as np
 import numpy.typing as npt
@@ -112,3 +114,48 @@ def check_choice(value: object, name: str, choices: Sequence[str]) -> str:
     if not isinstance(value, str) or value not in choices:
         raise ValueError(f"{name}: expected one of {', '.join(map(repr, choices))}, got {value!r}")
     return value
+
+
+# --- sizes --------------------------------------------------------------------------
+#: The largest array (bytes) allocated on behalf of a user-given size; the Rust core uses
+#: the same limit (``socialcore::error::MAX_ALLOC_BYTES``).
+MAX_ALLOC_BYTES = 2 << 30
+
+
+def check_size(name: str, shape: Sequence[int], itemsize: int = 8) -> None:
+    """Refuses, with ``ValueError`` naming ``name``, an array of ``shape`` that would need
+    more than :data:`MAX_ALLOC_BYTES` (instead of an abort or a ``MemoryError`` later)."""
+    total = itemsize
+    for d in shape:
+        total *= max(int(d), 0)
+    if total > MAX_ALLOC_BYTES:
+        dims = ", ".join(str(int(d)) for d in shape)
+        raise ValueError(
+            f"{name}: too large: an array of shape ({dims}) would need more than "
+            f"{MAX_ALLOC_BYTES >> 30} GiB"
+        )
+
+
+# --- options dataclasses -------------------------------------------------------------
+_T = TypeVar("_T")
+
+
+def apply_overrides(options: object, cls: type[_T], overrides: dict[str, object]) -> _T:
+    """``options`` (an instance of the frozen dataclass ``cls``, or ``None`` for the
+    defaults) with the fields named in ``overrides`` replaced; an unknown name raises
+    ``ValueError`` naming it. Validation happens in ``cls.__post_init__``."""
+    if options is None:
+        base = cls()
+    elif isinstance(options, cls):
+        base = options
+    else:
+        raise ValueError(f"options: expected a {cls.__name__}, got {type(options).__name__}")
+    if not overrides:
+        return base
+    names = {f.name for f in dataclasses.fields(base)}  # type: ignore[arg-type]
+    unknown = sorted(set(overrides) - names)
+    if unknown:
+        raise ValueError(
+            f"{unknown[0]}: not an option of {cls.__name__} (options: {', '.join(sorted(names))})"
+        )
+    return dataclasses.replace(base, **overrides)  # type: ignore[type-var]

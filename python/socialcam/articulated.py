@@ -18,7 +18,7 @@ import numpy as np
 import numpy.typing as npt
 
 from socialcam import _core
-from socialcam._validate import FloatArray, as_float_array
+from socialcam._validate import FloatArray, as_float_array, check_int
 from socialcam.camera import Cameras
 
 __all__ = [
@@ -235,18 +235,25 @@ def articulated_bqp(
 
 
 def articulated_reconstructability(
-    cameras: Cameras, parent: npt.ArrayLike, child: npt.ArrayLike, k: int
+    child: npt.ArrayLike, cameras: Cameras, parent: npt.ArrayLike, k: int
 ) -> float:
-    """Reconstructability η_a (Eq 4.13) of a known child trajectory.
+    """Reconstructability η_a (Eq 4.13) of a known child trajectory ``(F, 3)``.
+
+    Arguments in the order of :func:`reconstruct_articulated` and
+    :func:`socialcam.reconstructability`: the trajectory, the cameras, the parent
+    trajectory ``(F, 3)``, then ``k``.
 
     The ratio of the parts of the impostor and of the true relative trajectories that the
     ``k``-vector DCT basis cannot span, measured on unit relative directions (the vectors
     of Eq 4.12). ``η_a ≫ 1``: the smooth truth is separable from its impostor and the
     reconstruction is accurate; ``η_a < 1``: the impostor is smoother and wins.
     """
+    if not isinstance(cameras, Cameras):
+        raise ValueError(f"cameras: expected a socialcam.Cameras, got {type(cameras).__name__}")
     f = len(cameras)
     p_ = as_float_array(parent, "parent", (f, 3))
     c_ = as_float_array(child, "child", (f, 3))
+    k = check_int(k, "k", min=1, max=f)
     return float(
         _core.articulated_reconstructability(
             cameras.K, cameras.R, cameras.C, p_, c_, _times(cameras), int(k)

@@ -10,7 +10,7 @@ import numpy as np
 import numpy.typing as npt
 
 from socialcam import _core
-from socialcam._validate import FloatArray, as_float_array, readonly
+from socialcam._validate import FloatArray, as_float_array, check_size, readonly
 
 #: COLMAP puts pixel (0, 0) at the corner of the top-left pixel, OpenCV at its centre.
 COLMAP_TO_OPENCV_PIXEL = -0.5
@@ -139,13 +139,13 @@ class Cameras:
 
     # ----------------------------------------------------------------- geometry
     def project(
-        self, X: npt.ArrayLike, *, return_depth: bool = False
+        self, points: npt.ArrayLike, *, return_depth: bool = False
     ) -> FloatArray | tuple[FloatArray, FloatArray]:
         """Projects world points into every camera.
 
         Parameters
         ----------
-        X : array_like, shape (3,) or (N, 3)
+        points : array_like, shape (3,) or (N, 3)
             World points in metres.
         return_depth : bool
             Also return the depth along each optical axis (negative = behind the camera).
@@ -155,30 +155,33 @@ class Cameras:
         pixels : ndarray, shape (F, 2) or (F, N, 2)
         depth : ndarray, shape (F,) or (F, N), only with ``return_depth``
         """
-        X_ = as_float_array(X, "X")
+        X_ = as_float_array(points, "points")
         single = X_.ndim == 1
         if single:
             X_ = X_.reshape(1, -1)
         if X_.ndim != 2 or X_.shape[1] != 3:
-            raise ValueError(f"X: expected shape (3,) or (N, 3), got {np.shape(X)}")
+            raise ValueError(f"points: expected shape (3,) or (N, 3), got {np.shape(points)}")
+        check_size("points", (len(self), X_.shape[0], 2))
         px, depth = _core.project(self._K, self._R, self._C, X_)
         if single:
             px, depth = px[:, 0], depth[:, 0]
         return (px, depth) if return_depth else px
 
-    def project_trajectory(self, X: npt.ArrayLike) -> FloatArray:
+    def project_trajectory(self, points: npt.ArrayLike) -> FloatArray:
         """Projects a moving point, frame ``f`` into camera ``f``.
 
-        ``X`` is ``(F, 3)`` (one point) or ``(N, F, 3)``; returns ``(F, 2)`` or ``(N, F, 2)``.
-        Points at or behind a camera give NaN pixels.
+        ``points`` is ``(F, 3)`` (one point) or ``(N, F, 3)``; returns ``(F, 2)`` or
+        ``(N, F, 2)``. Points at or behind a camera give NaN pixels.
         """
-        X_ = as_float_array(X, "X")
+        X_ = as_float_array(points, "points")
         f = len(self)
         single = X_.ndim == 2
         if single:
             X_ = X_[None]
         if X_.ndim != 3 or X_.shape[1:] != (f, 3):
-            raise ValueError(f"X: expected shape ({f}, 3) or (N, {f}, 3), got {np.shape(X)}")
+            raise ValueError(
+                f"points: expected shape ({f}, 3) or (N, {f}, 3), got {np.shape(points)}"
+            )
         Xc = np.einsum("fij,nfj->nfi", self._R, X_ - self._C[None])
         h = np.einsum("fij,nfj->nfi", self._K, Xc)
         with np.errstate(divide="ignore", invalid="ignore"):
@@ -225,7 +228,12 @@ class Cameras:
         the pinhole part; use :meth:`undistort_points` to map raw pixel measurements to the
         undistorted pinhole pixels that every socialcam solver expects.
         """
-        import pycolmap
+        try:
+            import pycolmap
+        except ImportError as exc:  # pragma: no cover - depends on the install
+            raise ImportError(
+                "Cameras.from_colmap needs pycolmap: pip install 'socialcam[sfm]'"
+            ) from exc
 
         rec = reconstruction
         if not isinstance(rec, pycolmap.Reconstruction):

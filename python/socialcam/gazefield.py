@@ -23,20 +23,109 @@ frames.
 from __future__ import annotations
 
 import itertools
-from collections.abc import Sequence
-from dataclasses import dataclass
+import warnings
+from collections.abc import Mapping, Sequence
+from dataclasses import dataclass, replace
 from typing import Any, Literal
 
 import numpy as np
 import numpy.typing as npt
 
 from socialcam import _core
-from socialcam._validate import FloatArray, as_float_array, check_seed, readonly
+from socialcam._validate import (
+    FloatArray,
+    apply_overrides,
+    as_float_array,
+    check_choice,
+    check_float,
+    check_int,
+    check_seed,
+    readonly,
+)
+from socialcam.errors import ConvergenceError
 
 IntArray = npt.NDArray[np.int64]
 
 #: Tolerance on ``‖v‖ − 1`` (same as the core).
 UNIT_TOLERANCE = 1e-6
+
+_I64_MAX = 2**63 - 1
+
+#: Two charges of a window closer than this (metres) in every frame are one charge: even a
+#: precise gaze (h = 0.01 rad) cannot tell them apart from 1 m away.
+COINCIDE = 0.01
+
+
+@dataclass(frozen=True)
+class GazeFieldOptions:
+    """Options of :meth:`GazeField.fit` (validated on construction; the Rust binding reads
+    the EM fields of the same object). Angles in radians.
+
+    Attributes
+    ----------
+    kappa : fixed vMF concentration ``κ > 0``; ``None`` estimates it per window by maximum
+        likelihood (starting at ``kappa_init``, default ``1/mean(h²)``: the gaze model's
+        bandwidth, Sec 3.1)
+    kappa_init : starting ``κ`` of the estimate (``None``: from the rays' bandwidths)
+    lambda_g : weight ``λ_g ≥ 0`` of the temporal filter ``G`` (Eq 7.14), per frame
+    temporal_filter : ``"velocity"`` (``Σ‖r(t) − r(t−1)‖²``) or ``"acceleration"``
+        (``Σ‖2r(t) − r(t−1) − r(t+1)‖²``), thesis footnote 3
+    membership : ``"window"`` — one membership per member and window (Eq 7.14);
+        ``"frame"`` — re-estimated at every frame (Eq 7.11)
+    max_angle : radians in ``(0, π/2)``; rays further than this from a charge (or with it
+        behind them) add a constant to the M-step cost instead of ``d = ∞``
+    min_window : count runs shorter than this many frames are merged into a neighbour
+    max_iter, tol : EM cap and convergence tolerance (metres, and relative for ``κ``)
+    inner_iterations : M-step iterations per EM iteration
+    seed : seed of the charge finder's random seeds (``n_charges=None``)
+    charge_options : keyword arguments for :func:`socialcam.find_charges_sequence`
+    """
+
+    kappa: float | None = None
+    kappa_init: float | None = None
+    lambda_g: float = 1.0
+    temporal_filter: Literal["velocity", "acceleration"] = "velocity"
+    membership: Literal["window", "frame"] = "window"
+    max_angle: float = float(np.pi / 6)
+    min_window: int = 3
+    max_iter: int = 200
+    tol: float = 1e-6
+    inner_iterations: int = 5
+    seed: int = 0
+    charge_options: Mapping[str, Any] | None = None
+
+    def __post_init__(self) -> None:
+        if self.kappa is not None:
+            object.__setattr__(
+                self, "kappa", check_float(self.kappa, "kappa", min=0.0, min_exclusive=True)
+            )
+        if self.kappa_init is not None:
+            object.__setattr__(
+                self,
+                "kappa_init",
+                check_float(self.kappa_init, "kappa_init", min=0.0, min_exclusive=True),
+            )
+        object.__setattr__(self, "lambda_g", check_float(self.lambda_g, "lambda_g", min=0.0))
+        check_choice(self.temporal_filter, "temporal_filter", ("velocity", "acceleration"))
+        check_choice(self.membership, "membership", ("window", "frame"))
+        a = check_float(self.max_angle, "max_angle", min=0.0, min_exclusive=True)
+        if not a < np.pi / 2:
+            raise ValueError(f"max_angle: expected radians in (0, π/2), got {a}")
+        object.__setattr__(self, "max_angle", a)
+        object.__setattr__(self, "min_window", check_int(self.min_window, "min_window", min=1))
+        object.__setattr__(self, "max_iter", check_int(self.max_iter, "max_iter", min=1))
+        object.__setattr__(self, "tol", check_float(self.tol, "tol", min=0.0, min_exclusive=True))
+        object.__setattr__(
+            self,
+            "inner_iterations",
+            check_int(self.inner_iterations, "inner_iterations", min=1, max=10_000),
+        )
+        object.__setattr__(self, "seed", check_seed(self.seed))
+        if self.charge_options is not None and not isinstance(self.charge_options, Mapping):
+            raise ValueError(
+                f"charge_options: expected a mapping of find_charges options, got "
+                f"{type(self.charge_options).__name__}"
+            )
 
 
 @dataclass(frozen=True)
@@ -78,7 +167,12 @@ def _frame_parts(f: object, k: int) -> tuple[Any, Any, Any, Any]:
 
 
 def _flatten(frames: Sequence[object], default_h: float = 0.1) -> _Flat:
-    if isinstance(frames, (str, bytes)) or len(frames) == 0:
+    if isinstance(frames, (str, bytes)) or not isinstance(frames, Sequence):
+        raise ValueError(
+            f"frames: expected a sequence of frames (GazeRays or (p, v) tuples), got "
+            f"{type(frames).__name__}"
+        )
+    if len(frames) == 0:
         raise ValueError("frames: need at least one frame")
     ps, vs, hs, ids = [], [], [], []
     counts = []
@@ -104,6 +198,12 @@ def _flatten(frames: Sequence[object], default_h: float = 0.1) -> _Flat:
             i = np.asarray(i_)
             if i.shape != (n,) or not np.issubdtype(i.dtype, np.integer):
                 raise ValueError(f"frames[{k}].ids: expected {n} integer ids")
+            if n and np.issubdtype(i.dtype, np.unsignedinteger) and int(i.max()) > _I64_MAX:
+                # int64 is the id type throughout: a larger uint64 would wrap to a negative
+                # id (and could collide with another person's).
+                raise ValueError(
+                    f"frames[{k}].ids: person ids must fit in int64, got {int(i.max())}"
+                )
             i = i.astype(np.int64)
             if len(np.unique(i)) != n:
                 raise ValueError(f"frames[{k}].ids: a person appears twice")
@@ -120,6 +220,25 @@ def _flatten(frames: Sequence[object], default_h: float = 0.1) -> _Flat:
         np.concatenate(ids).astype(np.int64),
         off,
     )
+
+
+def _int_array(value: object, name: str) -> IntArray:
+    """An integer array: integer dtypes only (``[1, 0.5]`` is refused, not truncated)."""
+    a = np.asarray(value)
+    if a.size == 0:
+        return a.astype(np.int64)
+    if not np.issubdtype(a.dtype, np.integer) or a.dtype == np.bool_:
+        raise ValueError(f"{name}: expected integers, got {a.dtype} values")
+    if np.issubdtype(a.dtype, np.unsignedinteger) and int(a.max()) > _I64_MAX:
+        raise ValueError(f"{name}: values must fit in int64")
+    return a.astype(np.int64)
+
+
+def _per_row(a: FloatArray, name: str, n: int) -> FloatArray:
+    """A number or an ``(n,)`` array, as ``(n,)``."""
+    if a.ndim > 1 or (a.ndim == 1 and a.shape[0] not in (1, n)):
+        raise ValueError(f"{name}: expected a number or shape ({n},), got {a.shape}")
+    return np.broadcast_to(a, (n,))
 
 
 def _times(times: npt.ArrayLike | None, n: int) -> FloatArray:
@@ -171,20 +290,12 @@ class GazeField:
         cls,
         frames: Sequence[object],
         n_charges: int | npt.ArrayLike | None = None,
-        kappa: float | None = None,
         *,
         times: npt.ArrayLike | None = None,
-        lambda_g: float = 1.0,
-        filter: Literal["velocity", "acceleration"] = "velocity",
-        membership: Literal["window", "frame"] = "window",
-        max_angle: float = 30.0,
-        min_window: int = 3,
         init: Literal["charges", "pairs"] | npt.ArrayLike | None = None,
-        kappa_init: float | None = None,
-        max_iterations: int = 200,
-        tol: float = 1e-6,
-        seed: int = 0,
-        charge_options: dict[str, Any] | None = None,
+        options: GazeFieldOptions | None = None,
+        strict: bool = False,
+        **overrides: Any,
     ) -> GazeField:
         """Estimates the time-varying social charges from observed gaze by EM.
 
@@ -194,58 +305,50 @@ class GazeField:
         n_charges : ``None`` — take the count per frame from the social charges found by
             :func:`socialcam.find_charges_sequence` (Chapter 6), which also start the EM;
             an int — that many charges in every frame; or an (F,) integer array of counts.
-            Frames with 0 charges get no field.
-        kappa : fixed vMF concentration ``κ > 0``; ``None`` estimates it per window by
-            maximum likelihood (starting at ``kappa_init``, default ``1/mean(h²)``: the
-            gaze model's bandwidth, Sec 3.1)
+            Frames with 0 charges get no field. A window cannot hold more charges than
+            the people seen in it (``ValueError``).
         times : (F,) increasing seconds (default ``0..F-1``)
-        lambda_g : weight ``λ_g ≥ 0`` of the temporal filter ``G`` (Eq 7.14), per frame
-        filter : ``"velocity"`` (``Σ‖r(t) − r(t−1)‖²``) or ``"acceleration"``
-            (``Σ‖2r(t) − r(t−1) − r(t+1)‖²``), thesis footnote 3
-        membership : ``"window"`` — one membership per member and window (Eq 7.14);
-            ``"frame"`` — re-estimated at every frame (Eq 7.11)
-        max_angle : degrees; rays further than this from a charge (or with it behind them)
-            add a constant to the M-step cost instead of ``d = ∞`` (see the core docs)
-        min_window : count runs shorter than this many frames are merged into a neighbour
         init : ``"charges"`` (Chapter 6 charges; the default when ``n_charges`` is None),
             ``"pairs"`` (greedy pick among pairwise ray intersections; the default
             otherwise), or an (F, I, 3) array of starting positions (NaN-padded)
-        max_iterations, tol : EM cap and convergence tolerance (metres)
-        seed : seed of the charge finder's random seeds
-        charge_options : keyword arguments for :func:`socialcam.find_charges_sequence`
+        options : :class:`GazeFieldOptions`
+        strict : raise :class:`socialcam.ConvergenceError` when a window's EM hit
+            ``max_iter`` (otherwise ``converged`` says so)
+        **overrides : fields of :class:`GazeFieldOptions` to change, e.g. ``kappa=20.0``
+
+        Warns
+        -----
+        RuntimeWarning
+            when two charges of a window coincide at the end (within :data:`COINCIDE`
+            metres in every frame: fewer distinct charges than requested); that window is
+            reported as not converged.
 
         Raises
         ------
         ValueError
             malformed frames (NaN, non-unit ``v``), ``κ ≤ 0``, zero charges everywhere,
-            bad options
+            more charges than people in a window, bad options
         socialcam.DegenerateError
             a window in which no two rays meet in front of the eyes (nothing to start from)
         """
-        seed = check_seed(seed)
+        opts = apply_overrides(options, GazeFieldOptions, overrides)
         flat = _flatten(frames)
         n_frames = flat.n_frames
         t = _times(times, n_frames)
-        if kappa is not None and not (np.isfinite(kappa) and kappa > 0):
-            raise ValueError(f"kappa: the vMF concentration must be finite and > 0, got {kappa!r}")
-        if kappa_init is None:
-            kappa_init = float(np.clip(1.0 / np.mean(flat.h**2), 1.0, 1e4))
-        if not (np.isfinite(kappa_init) and kappa_init > 0):
-            raise ValueError(f"kappa_init: must be finite and > 0, got {kappa_init!r}")
-        if not (0.0 < max_angle < 90.0):
-            raise ValueError(f"max_angle: must lie in (0, 90) degrees, got {max_angle!r}")
-        if isinstance(min_window, bool) or int(min_window) < 1:
-            raise ValueError(f"min_window: expected a positive integer, got {min_window!r}")
+        if opts.kappa_init is None:
+            opts = replace(opts, kappa_init=float(np.clip(1.0 / np.mean(flat.h**2), 1.0, 1e4)))
+        kappa_init = float(opts.kappa_init)  # type: ignore[arg-type]
+        charge_options = dict(opts.charge_options or {})
 
         candidates = None
         if n_charges is None:
-            counts, candidates = _charges_from_chapter6(flat, seed, charge_options or {})
+            counts, candidates = _charges_from_chapter6(flat, opts.seed, charge_options)
             if init is None:
                 init = "charges"
         else:
             c = np.asarray(n_charges)
             if c.ndim == 0:
-                if not np.issubdtype(c.dtype, np.integer) or int(c) < 1:
+                if check_int(n_charges, "n_charges") < 1:
                     raise ValueError(
                         f"n_charges: zero or negative social charges ({n_charges!r}): the gaze "
                         "field needs at least one charge"
@@ -261,17 +364,26 @@ class GazeField:
                 counts = c.astype(np.int64)
             if init is None:
                 init = "pairs"
-        windows = _core.gaze_split_windows(counts, int(min_window))
+        windows = _core.gaze_split_windows(counts, opts.min_window)
         if (windows[:, 2] == 0).all():
             raise ValueError("n_charges: zero social charges in every frame: no field to fit")
+        fr_of_ray = flat.frame_of_ray()
+        for a, b, n in windows:
+            people_w = len(np.unique(flat.ids[(fr_of_ray >= a) & (fr_of_ray < b)]))
+            if n > people_w:
+                raise ValueError(
+                    f"n_charges: {n} charges in frames {a}..{b - 1}, where only {people_w} "
+                    "people are seen: each charge needs someone looking at it"
+                )
 
         if isinstance(init, str):
             if init == "charges":
                 if candidates is None:
-                    _, candidates = _charges_from_chapter6(flat, seed, charge_options or {})
+                    _, candidates = _charges_from_chapter6(flat, opts.seed, charge_options)
                 start = _core.gaze_init(flat.p, flat.v, flat.offsets, windows, 0.25, candidates)
             elif init == "pairs":
-                sigma = float(np.clip(1.0 / np.sqrt(kappa if kappa else kappa_init), 0.05, 0.6))
+                k0 = opts.kappa if opts.kappa is not None else kappa_init
+                sigma = float(np.clip(1.0 / np.sqrt(k0), 0.05, 0.6))
                 start = _core.gaze_init(flat.p, flat.v, flat.offsets, windows, sigma)
             else:
                 raise ValueError(f"init: expected 'charges', 'pairs' or an array, got {init!r}")
@@ -289,15 +401,31 @@ class GazeField:
             flat.offsets,
             windows,
             np.ascontiguousarray(start),
-            kappa=None if kappa is None else float(kappa),
-            kappa_init=float(kappa_init),
-            max_iterations=int(max_iterations),
-            tolerance=float(tol),
-            max_angle=float(np.deg2rad(max_angle)),
-            lambda_g=float(lambda_g),
-            filter=filter,
-            membership=membership,
+            opts,
         )
+        conv = np.array(conv, dtype=bool)
+        for w, (a, b, n) in enumerate(windows):
+            if n < 2:
+                continue
+            x = pos[a:b, :n]
+            d = np.linalg.norm(x[:, :, None] - x[:, None, :], axis=-1).max(axis=0)
+            close = np.argwhere(np.triu(d <= COINCIDE, 1))
+            if len(close):
+                i, j = close[0]
+                conv[w] = False
+                warnings.warn(
+                    f"n_charges: charges {i} and {j} of frames {a}..{b - 1} coincide: the "
+                    f"gaze supports fewer than {n} distinct charges there",
+                    RuntimeWarning,
+                    stacklevel=2,
+                )
+        if strict and not conv[windows[:, 2] > 0].all():
+            w = int(np.flatnonzero(~conv & (windows[:, 2] > 0))[0])
+            a, b, _n = windows[w]
+            raise ConvergenceError(
+                f"the EM of frames {a}..{b - 1} did not converge in max_iter={opts.max_iter} "
+                "iterations"
+            )
         kap_f = np.full(n_frames, np.nan)
         for w, (a, b, _n) in enumerate(windows):
             kap_f[a:b] = kap_w[w]
@@ -327,12 +455,30 @@ class GazeField:
 
     def frame_index(self, t: float | npt.ArrayLike | None, n: int) -> IntArray:
         """Frame of each of ``n`` queries: the frame nearest in time to ``t`` (scalar or
-        ``(n,)``); ``t=None`` only for a single-frame field."""
+        ``(n,)``); ``t=None`` only for a single-frame field.
+
+        The field is only known over the fitted frames: a time more than half a frame
+        spacing before the first frame or after the last raises ``ValueError`` (it used to
+        be clamped silently to the nearest end)."""
+        n = check_int(n, "n", min=0)
         if t is None:
             if len(self.times) != 1:
                 raise ValueError("t: required for a field over several frames")
             return np.zeros(n, dtype=np.int64)
-        ta = np.broadcast_to(as_float_array(t, "t"), (n,))
+        ta_ = as_float_array(t, "t")
+        if ta_.ndim > 1 or (ta_.ndim == 1 and ta_.shape[0] not in (1, n)):
+            raise ValueError(f"t: expected a number or shape ({n},), got {ta_.shape}")
+        ta = np.broadcast_to(ta_, (n,))
+        half = 0.5 * float(np.median(np.diff(self.times))) if len(self.times) > 1 else 0.0
+        lo, hi = self.times[0] - half, self.times[-1] + half
+        if n and (
+            ta.min() < lo - 1e-9 * max(1.0, abs(lo)) or ta.max() > hi + 1e-9 * max(1.0, abs(hi))
+        ):
+            bad = float(ta[np.argmax((ta < lo) | (ta > hi))])
+            raise ValueError(
+                f"t: {bad} s is outside the fitted frames [{self.times[0]:.6g}, "
+                f"{self.times[-1]:.6g}] s; the field is not defined there"
+            )
         idx = np.clip(np.searchsorted(self.times, ta), 1, max(len(self.times) - 1, 1))
         if len(self.times) == 1:
             return np.zeros(n, dtype=np.int64)
@@ -356,7 +502,9 @@ class GazeField:
         """
         pts = as_float_array(points, "points")
         single = pts.ndim == 1
-        pts = as_float_array(pts.reshape(-1, 3) if single else pts, "points", (None, 3))
+        if single and pts.shape != (3,):
+            raise ValueError(f"points: expected shape (3,) or (M, 3), got {pts.shape}")
+        pts = as_float_array(pts.reshape(1, 3) if single else pts, "points", (None, 3))
         fr = self.frame_index(t, len(pts))
         out = _core.gaze_predict(*self._state(), fr, pts)
         return out[0] if single else out
@@ -378,17 +526,17 @@ class GazeField:
         p: npt.ArrayLike,
         v: npt.ArrayLike,
         t: float | npt.ArrayLike | None = None,
+        *,
         self_radius: float = 0.3,
     ) -> FloatArray:
-        """Degrees between each ``v`` and the direction to the closest (in angle) charge,
+        """Radians between each ``v`` and the direction to the closest (in angle) charge,
         ignoring charges within ``self_radius`` metres of ``p``; NaN where none
         qualifies. ``(M,)``."""
         pp = as_float_array(p, "p", (None, 3))
         vv = as_float_array(v, "v", (len(pp), 3))
+        r = check_float(self_radius, "self_radius", min=0.0)
         fr = self.frame_index(t, len(pp))
-        return np.rad2deg(
-            _core.gaze_angle_to_charges(*self._state(), fr, pp, vv, float(self_radius))
-        )
+        return _core.gaze_angle_to_charges(*self._state(), fr, pp, vv, r)
 
     def to_dict(self) -> dict[str, Any]:
         def clean(a: np.ndarray) -> Any:
@@ -414,6 +562,7 @@ class GazeField:
         magnitude) and, optionally, one frame's observed ``rays``. Returns the axes."""
         import matplotlib.pyplot as plt
 
+        n = check_int(n, "n", min=2, max=1000)
         fr = int(self.frame_index(t, 1)[0])
         ch = self.positions[fr]
         ok = ~np.isnan(ch[:, 0])
@@ -553,9 +702,24 @@ def rbf_predict(
 
     flat = _flatten(frames)
     pts = as_float_array(points, "points", (None, 3))
-    fr = np.asarray(frame, dtype=np.int64)
+    fr = _int_array(frame, "frame")
     if fr.shape != (len(pts),) or (fr < 0).any() or (fr >= flat.n_frames).any():
         raise ValueError("frame: expected one valid frame index per point")
+    kernel = check_choice(
+        kernel,
+        "kernel",
+        (
+            "linear",
+            "thin_plate_spline",
+            "cubic",
+            "quintic",
+            "multiquadric",
+            "inverse_multiquadric",
+            "inverse_quadratic",
+            "gaussian",
+        ),
+    )
+    smoothing = check_float(smoothing, "smoothing", min=0.0)
     out = np.full((len(pts), 3), np.nan)
     o = flat.offsets
     for f in np.unique(fr):
@@ -577,10 +741,10 @@ def rbf_predict(
 
 def cross_validate_gaze(
     frames: Sequence[object],
+    *,
     leave_out: int = 1,
     method: Literal["field", "rbf"] = "field",
     seed: int = 0,
-    *,
     times: npt.ArrayLike | None = None,
     n_splits: int | None = None,
     eligible: npt.ArrayLike | None = None,
@@ -604,19 +768,26 @@ def cross_validate_gaze(
     GazeCrossValidation : errors in degrees, with ``mean`` and ``std``
     """
     seed = check_seed(seed)
-    if method not in ("field", "rbf"):
-        raise ValueError(f"method: expected 'field' or 'rbf', got {method!r}")
+    check_choice(method, "method", ("field", "rbf"))
     flat = _flatten(frames)
     people = np.unique(flat.ids)
-    pool = (
-        people if eligible is None else np.intersect1d(people, np.asarray(eligible, dtype=np.int64))
-    )
-    k = int(leave_out)
-    if isinstance(leave_out, bool) or k < 1 or k >= len(people) - 1 or k > len(pool):
+    if eligible is None:
+        pool = people
+    else:
+        el = _int_array(eligible, "eligible")
+        if el.ndim != 1 or len(el) == 0:
+            raise ValueError("eligible: expected a non-empty list of person ids")
+        pool = np.intersect1d(people, el)
+        if len(pool) == 0:
+            raise ValueError("eligible: none of these person ids appears in the frames")
+    k = check_int(leave_out, "leave_out", min=1)
+    if k >= len(people) - 1 or k > len(pool):
         raise ValueError(
             f"leave_out: expected 1 <= k <= {min(len(people) - 2, len(pool))} (two members must "
             f"stay), got {leave_out!r}"
         )
+    if n_splits is not None:
+        check_int(n_splits, "n_splits", min=1, max=1_000_000)
     t = _times(times, flat.n_frames)
     if k == 1 and n_splits is None:
         subsets = pool[:, None]
@@ -664,7 +835,7 @@ class Anomalies:
     ----------
     frame : (K,) frame index of each flagged observation
     member : (K,) person id of each flagged observation
-    score : (K,) the score that crossed the threshold (degrees for ``kind="angle"``, log
+    score : (K,) the score that crossed the threshold (radians for ``kind="angle"``, log
         density for ``kind="loglik"``)
     scores : (N,) the score of every observation (rays in frame order; NaN where the field
         cannot judge, e.g. the only charge sits on the member)
@@ -698,8 +869,8 @@ class Anomalies:
 def detect_anomalies(
     frames: Sequence[object],
     field: GazeField,
-    threshold: float = 30.0,
     *,
+    threshold: float = float(np.pi / 6),
     times: npt.ArrayLike | None = None,
     kind: Literal["angle", "loglik"] = "angle",
     self_radius: float = 0.3,
@@ -707,7 +878,7 @@ def detect_anomalies(
     """Flags observations whose gaze does not follow the group's attention.
 
     ``kind="angle"`` (default): flagged when the primary gaze is more than ``threshold``
-    degrees from the direction to every charge of the field at that time (charges within
+    radians from the direction to every charge of the field at that time (charges within
     ``self_radius`` metres of the member are ignored: the person being looked at is not
     expected to look at themself; with no charge left the observation is not judged).
     ``kind="loglik"``: flagged when ``ln p(v | p, t)`` (Eq 7.7) is below ``threshold``.
@@ -715,10 +886,11 @@ def detect_anomalies(
     ``frames`` must be on the field's time axis (``times``, default the field's own).
     """
     flat = _flatten(frames)
-    if kind not in ("angle", "loglik"):
-        raise ValueError(f"kind: expected 'angle' or 'loglik', got {kind!r}")
-    if not np.isfinite(threshold):
-        raise ValueError("threshold: must be finite")
+    if not isinstance(field, GazeField):
+        raise ValueError(f"field: expected a GazeField, got {type(field).__name__}")
+    check_choice(kind, "kind", ("angle", "loglik"))
+    threshold = check_float(threshold, "threshold")
+    self_radius = check_float(self_radius, "self_radius", min=0.0)
     t = (
         field.times
         if times is None and flat.n_frames == len(field.times)
@@ -766,8 +938,8 @@ def fuse_gaze(
     """
     a = as_float_array(measured, "measured", (None, 3))
     b = as_float_array(predicted, "predicted", (len(a), 3), allow_nan=True)
-    ka = np.broadcast_to(as_float_array(kappa_measured, "kappa_measured"), (len(a),))
-    kb = np.broadcast_to(as_float_array(kappa_field, "kappa_field", allow_nan=True), (len(a),))
+    ka = _per_row(as_float_array(kappa_measured, "kappa_measured"), "kappa_measured", len(a))
+    kb = _per_row(as_float_array(kappa_field, "kappa_field", allow_nan=True), "kappa_field", len(a))
     if (ka <= 0).any() or (np.nan_to_num(kb, nan=1.0) <= 0).any():
         raise ValueError("kappa_measured, kappa_field: concentrations must be > 0")
     for name, arr in (("measured", a), ("predicted", b)):

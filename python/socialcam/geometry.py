@@ -9,9 +9,19 @@ import numpy as np
 import numpy.typing as npt
 
 from socialcam import _core
-from socialcam._validate import FloatArray, as_float_array, readonly
+from socialcam._validate import (
+    FloatArray,
+    as_float_array,
+    check_float,
+    check_int,
+    check_size,
+    readonly,
+)
 from socialcam.camera import Cameras
-from socialcam.errors import DegenerateError
+from socialcam.errors import ConvergenceError, DegenerateError
+
+#: Tolerance on ``‖v‖ − 1`` for unit directions (the gaze field uses the same).
+UNIT_TOLERANCE = 1e-6
 
 
 @dataclass(frozen=True)
@@ -45,14 +55,32 @@ class TriangulationInfo:
 
 @overload
 def triangulate(
-    x: npt.ArrayLike, cameras: Cameras, refine: bool = ..., *, return_info: Literal[False] = ...
+    x: npt.ArrayLike,
+    cameras: Cameras,
+    *,
+    refine: bool = ...,
+    max_iter: int = ...,
+    strict: bool = ...,
+    return_info: Literal[False] = ...,
 ) -> FloatArray: ...
 @overload
 def triangulate(
-    x: npt.ArrayLike, cameras: Cameras, refine: bool = ..., *, return_info: Literal[True]
+    x: npt.ArrayLike,
+    cameras: Cameras,
+    *,
+    refine: bool = ...,
+    max_iter: int = ...,
+    strict: bool = ...,
+    return_info: Literal[True],
 ) -> tuple[FloatArray, TriangulationInfo]: ...
 def triangulate(
-    x: npt.ArrayLike, cameras: Cameras, refine: bool = True, *, return_info: bool = False
+    x: npt.ArrayLike,
+    cameras: Cameras,
+    *,
+    refine: bool = True,
+    max_iter: int = 50,
+    strict: bool = False,
+    return_info: bool = False,
 ) -> FloatArray | tuple[FloatArray, TriangulationInfo]:
     """Triangulates static points seen by several cameras.
 
@@ -68,6 +96,10 @@ def triangulate(
         ``V`` cameras.
     refine : bool
         Refine the linear solution by minimising reprojection error.
+    max_iter : int
+        Levenberg–Marquardt iteration cap per point (``info.converged`` says if it was met).
+    strict : bool
+        Raise :class:`ConvergenceError` when a triangulated point hit ``max_iter``.
     return_info : bool
         Also return a :class:`TriangulationInfo`.
 
@@ -83,9 +115,14 @@ def triangulate(
         Single-point form only: fewer than two views, or parallel rays.
     ValueError
         Wrong shapes, infinite values, mismatched number of views.
+    ConvergenceError
+        ``strict=True`` and some point did not converge.
     """
     if not isinstance(cameras, Cameras):
         raise ValueError(f"cameras: expected socialcam.Cameras, got {type(cameras).__name__}")
+    if not isinstance(refine, (bool, np.bool_)):
+        raise ValueError(f"refine: expected a bool, got {refine!r}")
+    n_iter = check_int(max_iter, "max_iter", min=1)
     x_ = as_float_array(x, "x", allow_nan=True)
     single = x_.ndim == 2
     if single:
@@ -95,16 +132,25 @@ def triangulate(
         raise ValueError(
             f"x: expected shape ({v}, 2) or (N, {v}, 2) for {v} cameras, got {np.shape(x)}"
         )
-    X, rms, rms0, views, conv, why = _core.triangulate(cameras.K, cameras.R, cameras.C, x_, refine)
+    X, rms, rms0, views, conv, why = _core.triangulate(
+        cameras.K, cameras.R, cameras.C, x_, bool(refine), n_iter
+    )
     if single and why[0] is not None:
         raise DegenerateError(why[0])
+    if strict:
+        stuck = np.flatnonzero(~conv & np.array([w is None for w in why], dtype=bool))
+        if len(stuck):
+            raise ConvergenceError(
+                f"{len(stuck)} point(s) did not converge in max_iter={n_iter} iterations "
+                f"(first: point {int(stuck[0])})"
+            )
     info = TriangulationInfo(readonly(rms), readonly(rms0), readonly(views), readonly(conv), why)
     out = X[0] if single else X
     return (out, info) if return_info else out
 
 
 def dct_basis(
-    times: npt.ArrayLike, k: int, t0: float | None = None, t1: float | None = None
+    times: npt.ArrayLike, k: int, *, t0: float | None = None, t1: float | None = None
 ) -> FloatArray:
     """The first ``k`` DCT-II trajectory basis vectors at (possibly non-uniform) times.
 
@@ -119,7 +165,7 @@ def dct_basis(
     times : array_like, shape (F,)
         Seconds.
     k : int
-        Number of basis vectors, ``k >= 1``.
+        Number of basis vectors, ``k >= 1`` (the ``(F, k)`` result must fit in 2 GiB).
     t0, t1 : float, optional
         The time span mapped to ``[0, 1]``.
 
@@ -128,9 +174,13 @@ def dct_basis(
     ndarray, shape (F, k)
     """
     t = as_float_array(times, "times", (None,))
-    if isinstance(k, bool) or not isinstance(k, (int, np.integer)) or k < 1:
-        raise ValueError(f"k: expected a positive integer, got {k!r}")
-    return _core.dct_basis(t, int(k), t0, t1)
+    kk = check_int(k, "k", min=1)
+    check_size("k", (len(t), kk))
+    a = None if t0 is None else check_float(t0, "t0")
+    b = None if t1 is None else check_float(t1, "t1")
+    if a is not None and b is not None and not a < b:
+        raise ValueError(f"t0, t1: need t0 < t1, got {a} and {b}")
+    return _core.dct_basis(t, kk, a, b)
 
 
 def align_similarity(
@@ -185,7 +235,10 @@ def ray_sphere(
     n = o.shape[0]
     d = as_float_array(directions, "directions", (n, 3))
     c = as_float_array(centres, "centres", (n, 3))
-    r = np.broadcast_to(as_float_array(radii, "radii"), (n,)).copy()
+    r_ = as_float_array(radii, "radii")
+    if r_.ndim > 1 or (r_.ndim == 1 and r_.shape[0] not in (1, n)):
+        raise ValueError(f"radii: expected a number or shape ({n},), got {r_.shape}")
+    r = np.broadcast_to(r_, (n,)).copy()
     return _core.ray_sphere(o, d, c, r)
 
 
@@ -199,7 +252,8 @@ def perspective_distance(p: npt.ArrayLike, v: npt.ArrayLike, x: npt.ArrayLike) -
     Parameters
     ----------
     p, v, x : array_like, shape (N, 3)
-        Eye centres, unit directions, query points (broadcast row by row).
+        Eye centres, unit directions (``|‖v‖ − 1| ≤ 1e-6``; anything else is refused, as
+        the distance scales with ``1/‖v‖``), query points, row by row.
 
     Returns
     -------
@@ -209,4 +263,9 @@ def perspective_distance(p: npt.ArrayLike, v: npt.ArrayLike, x: npt.ArrayLike) -
     n = p_.shape[0]
     v_ = as_float_array(v, "v", (n, 3))
     x_ = as_float_array(x, "x", (n, 3))
+    norms = np.linalg.norm(v_, axis=1)
+    bad = np.abs(norms - 1.0) > UNIT_TOLERANCE
+    if bad.any():
+        i = int(np.argmax(bad))
+        raise ValueError(f"v: direction {i} has norm {norms[i]:.6g}, not 1 (normalise it)")
     return _core.perspective_distance(p_, v_, x_)

@@ -197,7 +197,10 @@ def load_c3d(path: str | os.PathLike[str], *, frames: slice | None = None) -> C3
     file's ``POINT:UNITS`` to metres and marking invalid samples (negative residual) NaN."""
     import warnings
 
-    import c3d
+    try:
+        import c3d
+    except ImportError as exc:  # pragma: no cover - depends on the install
+        raise ImportError("load_c3d needs c3d: pip install 'socialcam[mocap]'") from exc
 
     with open(path, "rb") as fh, warnings.catch_warnings():
         # The reader warns about absent analog channels, which marker files rarely have.

@@ -1,5 +1,5 @@
 """Structure from motion of a static scene through pycolmap (CPU), giving the camera poses
-of social-camera frames in one world frame (DESIGN.md, "Data flow").
+of social-camera frames in one world frame (the README's conventions).
 
 >>> rec_dir = reconstruct_static("frames/", "work/sfm")        # doctest: +SKIP
 >>> cams = Cameras.from_colmap(rec_dir)                          # doctest: +SKIP
@@ -36,7 +36,7 @@ def reconstruct_static(
         social camera).
     out_dir : working folder; receives ``database.db`` and the model in ``sparse/``.
     camera_mode : ``"single"`` (one camera for all images: frames of one device — pycolmap's
-        ``AUTO`` would give one camera per image, see STACK.md), ``"per_folder"`` or
+        ``AUTO`` would give one camera per image), ``"per_folder"`` or
         ``"per_image"``.
     camera_model : COLMAP camera model for the intrinsics to estimate.
     max_image_size : images are downscaled to this size for SIFT; keypoints and intrinsics
@@ -58,7 +58,12 @@ def reconstruct_static(
     RuntimeError
         No model could be reconstructed.
     """
-    import pycolmap
+    try:
+        import pycolmap
+    except ImportError as exc:  # pragma: no cover - depends on the install
+        raise ImportError(
+            "structure from motion needs pycolmap: pip install 'socialcam[sfm]'"
+        ) from exc
 
     images = Path(image_dir)
     if not images.is_dir():

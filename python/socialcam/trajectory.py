@@ -17,9 +17,17 @@ import numpy as np
 import numpy.typing as npt
 
 from socialcam import _core
-from socialcam._validate import FloatArray, as_float_array, readonly
+from socialcam._validate import (
+    FloatArray,
+    apply_overrides,
+    as_float_array,
+    check_choice,
+    check_int,
+    check_size,
+    readonly,
+)
 from socialcam.camera import Cameras
-from socialcam.errors import DegenerateError
+from socialcam.errors import ConvergenceError, DegenerateError
 
 IntArray = npt.NDArray[np.int64]
 BoolArray = npt.NDArray[np.bool_]
@@ -65,7 +73,7 @@ class Trajectory:
         Condition number of ``QΘ`` (normalised measurements).
     sigma : float
         Residual standard deviation per image coordinate (pixels) scaling the covariance.
-    observed : int
+    n_observed : int
         Number of frames where the point was seen.
     cv_error : ndarray, shape (Kcv,)
         Cross-validated reprojection RMS (pixels) for ``K = 1, 2, …`` (inf: not admissible;
@@ -87,15 +95,22 @@ class Trajectory:
     rank: int
     cond: float
     sigma: float
-    observed: int
+    n_observed: int
     cv_error: FloatArray
     covariance: FloatArray | None
     span: tuple[float, float, float]
 
-    def at(self, times: npt.ArrayLike) -> FloatArray:
-        """The trajectory at arbitrary times ``(M,)`` seconds → ``(M, 3)`` metres."""
+    def at(self, times: npt.ArrayLike, *, extrapolate: bool = False) -> FloatArray:
+        """The trajectory at arbitrary times ``(M,)`` seconds → ``(M, 3)`` metres.
+
+        The DCT basis is even about both ends of its span (``cos`` mirrors), so outside
+        ``[span[0], span[1]]`` it would return the trajectory reflected in time, not a
+        prediction. Times outside the span therefore raise ``ValueError`` unless
+        ``extrapolate=True`` (then the mirrored values are returned as they are).
+        """
         scalar = np.ndim(times) == 0
         t = as_float_array(times, "times").reshape(-1)
+        _check_in_span(t, self.span, extrapolate)
         out = _basis(t, self.k, self.span) @ self.coeffs
         return out[0] if scalar else out
 
@@ -113,7 +128,7 @@ class Trajectory:
             "rank": self.rank,
             "cond": self.cond,
             "sigma": self.sigma,
-            "observed": self.observed,
+            "n_observed": self.n_observed,
             "cv_error": self.cv_error.tolist(),
             "covariance": None if self.covariance is None else self.covariance.tolist(),
             "span": list(self.span),
@@ -135,7 +150,7 @@ class TrajectoryBatch:
     coeffs : ndarray, shape (N, Kmax, 3)
         Zero beyond each point's ``k``.
     converged : ndarray of bool, shape (N,)
-    iterations, rank, observed : ndarray of int, shape (N,)
+    iterations, rank, n_observed : ndarray of int, shape (N,)
     cond, sigma : ndarray, shape (N,)
     cv_error : ndarray, shape (N, Kcv)
         NaN beyond each point's range.
@@ -154,7 +169,7 @@ class TrajectoryBatch:
     rank: IntArray
     cond: FloatArray
     sigma: FloatArray
-    observed: IntArray
+    n_observed: IntArray
     cv_error: FloatArray
     failures: list[str | None]
     span: tuple[float, float, float]
@@ -189,15 +204,19 @@ class TrajectoryBatch:
             rank=int(self.rank[i]),
             cond=float(self.cond[i]),
             sigma=float(self.sigma[i]),
-            observed=int(self.observed[i]),
+            n_observed=int(self.n_observed[i]),
             cv_error=cv[~np.isnan(cv)],
             covariance=None,
             span=self.span,
         )
 
-    def at(self, times: npt.ArrayLike) -> FloatArray:
-        """All trajectories at times ``(M,)`` seconds → ``(N, M, 3)`` (NaN for failures)."""
+    def at(self, times: npt.ArrayLike, *, extrapolate: bool = False) -> FloatArray:
+        """All trajectories at times ``(M,)`` seconds → ``(N, M, 3)`` (NaN for failures).
+        Times outside the span raise ``ValueError`` unless ``extrapolate`` (see
+        :meth:`Trajectory.at`)."""
         t = as_float_array(times, "times", (None,))
+        _check_in_span(t, self.span, extrapolate)
+        check_size("times", (len(self), len(t), 3))
         kmax = self.coeffs.shape[1]
         out = np.einsum("mk,nkc->nmc", _basis(t, kmax, self.span), self.coeffs)
         out[~self.ok] = np.nan
@@ -217,67 +236,112 @@ class TrajectoryBatch:
             "rank": self.rank.tolist(),
             "cond": self.cond.tolist(),
             "sigma": self.sigma.tolist(),
-            "observed": self.observed.tolist(),
+            "n_observed": self.n_observed.tolist(),
             "cv_error": self.cv_error.tolist(),
             "failures": list(self.failures),
             "span": list(self.span),
         }
 
 
-def _k_arg(k: int | Literal["auto"]) -> int | None:
-    if isinstance(k, str):
-        if k != "auto":
-            raise ValueError(f"k: expected a positive integer or 'auto', got {k!r}")
-        return None
-    if isinstance(k, bool) or not isinstance(k, (int, np.integer)) or int(k) < 1:
-        raise ValueError(f"k: expected a positive integer or 'auto', got {k!r}")
-    return int(k)
+def _check_in_span(t: FloatArray, span: tuple[float, float, float], extrapolate: bool) -> None:
+    t0, t1, _ = span
+    slack = 1e-9 * (t1 - t0)
+    if not extrapolate and len(t) and (t.min() < t0 - slack or t.max() > t1 + slack):
+        raise ValueError(
+            f"times: outside the fitted span [{t0:.6g}, {t1:.6g}] s, where the DCT basis "
+            "mirrors the trajectory instead of predicting it (pass extrapolate=True to get "
+            "the mirrored values anyway)"
+        )
 
 
-def _cameras_arg(cameras: Cameras) -> FloatArray:
+@dataclass(frozen=True)
+class TrajectoryOptions:
+    """Options of :func:`reconstruct_trajectory` and :func:`reconstruct_trajectories`
+    (validated on construction; the Rust binding reads the same object).
+
+    Attributes
+    ----------
+    k : int or "auto"
+        DCT basis functions per coordinate, or ``"auto"`` for per-point N-fold cross
+        validation (Eq 5.8) over ``K = k_min … min(k_max, ⌊2F̂/3⌋)`` (``F̂`` observed frames).
+        The cost of cross validation grows like ``k_max³``: cap ``k_max`` for long sequences.
+    folds : int
+        Cross-validation folds (≥ 2), spread uniformly in time.
+    k_min : int
+        Smallest ``K`` tried by cross validation (≥ 1).
+    k_max : int, optional
+        Largest ``K`` tried by cross validation.
+    cv_rule : {"min", "1se"}
+        ``"min"``: the ``K`` of least held-out error (Eq 5.8). ``"1se"``: the smallest ``K``
+        within one standard error of it (more parsimonious; still points get ``K = 1``).
+    refine : bool
+        Refine on the reprojection error (Eq 5.9, Levenberg–Marquardt).
+    max_iter : int
+        Levenberg–Marquardt iteration cap (``converged=False`` when reached).
+    """
+
+    k: int | Literal["auto"] = "auto"
+    folds: int = 5
+    k_min: int = 1
+    k_max: int | None = None
+    cv_rule: Literal["min", "1se"] = "min"
+    refine: bool = True
+    max_iter: int = 100
+
+    def __post_init__(self) -> None:
+        if isinstance(self.k, str):
+            check_choice(self.k, "k", ("auto",))
+        else:
+            object.__setattr__(self, "k", check_int(self.k, "k", min=1))
+        object.__setattr__(self, "folds", check_int(self.folds, "folds", min=2))
+        object.__setattr__(self, "k_min", check_int(self.k_min, "k_min", min=1))
+        if self.k_max is not None:
+            object.__setattr__(self, "k_max", check_int(self.k_max, "k_max", min=self.k_min))
+        check_choice(self.cv_rule, "cv_rule", ("min", "1se"))
+        if not isinstance(self.refine, (bool, np.bool_)):
+            raise ValueError(f"refine: expected a bool, got {self.refine!r}")
+        object.__setattr__(self, "refine", bool(self.refine))
+        object.__setattr__(self, "max_iter", check_int(self.max_iter, "max_iter", min=1))
+
+
+def _cameras_arg(cameras: object) -> tuple[Cameras, FloatArray]:
     if not isinstance(cameras, Cameras):
         raise ValueError(f"cameras: expected a socialcam.Cameras, got {type(cameras).__name__}")
     if cameras.times is None:
         raise ValueError(
             "cameras: trajectory reconstruction needs capture times (Cameras(..., times=...))"
         )
-    return cameras.times
+    return cameras, cameras.times
+
+
+def _check_converged(r: dict[str, Any], opts: TrajectoryOptions, strict: bool) -> None:
+    if not strict:
+        return
+    ok = np.array([f is None for f in r["failures"]], dtype=bool)
+    stuck = np.flatnonzero(ok & ~np.asarray(r["converged"], dtype=bool))
+    if len(stuck):
+        raise ConvergenceError(
+            f"{len(stuck)} trajectory(ies) did not converge in max_iter={opts.max_iter} "
+            f"iterations (first: point {int(stuck[0])})"
+        )
 
 
 def _run(
     x: FloatArray,
     cameras: Cameras,
-    k: int | Literal["auto"],
-    folds: int,
-    k_max: int | None,
-    refine: bool,
-    k_min: int,
-    cv_rule: Literal["min", "1se"],
-    max_iterations: int,
+    times: FloatArray,
+    options: TrajectoryOptions,
+    *,
     keep_covariance: bool,
     strict: bool,
 ) -> dict[str, Any]:
-    times = _cameras_arg(cameras)
-    for name, v in (("folds", folds), ("k_min", k_min), ("max_iterations", max_iterations)):
-        if isinstance(v, bool) or not isinstance(v, (int, np.integer)) or int(v) < 0:
-            raise ValueError(f"{name}: expected a non-negative integer, got {v!r}")
-    if k_max is not None and (
-        isinstance(k_max, bool) or not isinstance(k_max, (int, np.integer)) or int(k_max) < 1
-    ):
-        raise ValueError(f"k_max: expected a positive integer or None, got {k_max!r}")
     result: dict[str, Any] = _core.reconstruct_trajectories(
         cameras.K,
         cameras.R,
         cameras.C,
         times,
         x,
-        k=_k_arg(k),
-        folds=int(folds),
-        k_min=int(k_min),
-        k_max=None if k_max is None else int(k_max),
-        cv_rule=cv_rule,
-        refine=bool(refine),
-        max_iterations=int(max_iterations),
+        options,
         keep_covariance=keep_covariance,
         strict=strict,
     )
@@ -287,14 +351,10 @@ def _run(
 def reconstruct_trajectory(
     x: npt.ArrayLike,
     cameras: Cameras,
-    k: int | Literal["auto"] = "auto",
-    folds: int = 5,
-    k_max: int | None = None,
-    refine: bool = True,
     *,
-    k_min: int = 1,
-    cv_rule: Literal["min", "1se"] = "min",
-    max_iterations: int = 100,
+    options: TrajectoryOptions | None = None,
+    strict: bool = False,
+    **overrides: Any,
 ) -> Trajectory:
     """Reconstructs the 3D trajectory of one moving point (thesis Chapter 5).
 
@@ -305,23 +365,12 @@ def reconstruct_trajectory(
         seen in that frame.
     cameras : Cameras
         ``F`` cameras with capture ``times`` (seconds, any order, one clock).
-    k : int or "auto"
-        DCT basis functions per coordinate, or ``"auto"`` for per-point N-fold cross
-        validation (Eq 5.8) over ``K = k_min … min(k_max, ⌊2F̂/3⌋)`` (``F̂`` observed frames).
-        The cost of cross validation grows like ``k_max³``: cap ``k_max`` for long sequences.
-    folds : int
-        Cross-validation folds, spread uniformly in time.
-    k_max : int, optional
-        Largest ``K`` tried by cross validation.
-    refine : bool
-        Refine on the reprojection error (Eq 5.9, Levenberg–Marquardt).
-    k_min : int
-        Smallest ``K`` tried by cross validation.
-    cv_rule : {"min", "1se"}
-        ``"min"``: the ``K`` of least held-out error (Eq 5.8). ``"1se"``: the smallest ``K``
-        within one standard error of it (more parsimonious; still points get ``K = 1``).
-    max_iterations : int
-        Levenberg–Marquardt iteration cap (``converged=False`` when reached).
+    options : TrajectoryOptions, optional
+        ``k``, ``folds``, ``k_min``, ``k_max``, ``cv_rule``, ``refine``, ``max_iter``.
+    strict : bool
+        Raise :class:`ConvergenceError` when the refinement hit ``max_iter``.
+    **overrides
+        Fields of :class:`TrajectoryOptions` to change, e.g. ``k=10`` or ``k_max=25``.
 
     Returns
     -------
@@ -334,21 +383,14 @@ def reconstruct_trajectory(
         moving like the point (Theorem 2) — the message says which.
     ValueError
         Bad shapes, NaN in cameras, non-finite times, all observations missing, bad options.
+    ConvergenceError
+        ``strict=True`` and the refinement did not converge.
     """
-    x_ = as_float_array(x, "x", (len(cameras), 2), allow_nan=True)
-    r = _run(
-        x_[None],
-        cameras,
-        k,
-        folds,
-        k_max,
-        refine,
-        k_min,
-        cv_rule,
-        max_iterations,
-        keep_covariance=True,
-        strict=True,
-    )
+    opts = apply_overrides(options, TrajectoryOptions, overrides)
+    cams, times = _cameras_arg(cameras)
+    x_ = as_float_array(x, "x", (len(cams), 2), allow_nan=True)
+    r = _run(x_[None], cams, times, opts, keep_covariance=True, strict=True)
+    _check_converged(r, opts, strict)
     kk = int(r["k"][0])
     cv = r["cv_error"][0]
     return Trajectory(
@@ -363,7 +405,7 @@ def reconstruct_trajectory(
         rank=int(r["rank"][0]),
         cond=float(r["cond"][0]),
         sigma=float(r["sigma"][0]),
-        observed=int(r["observed"][0]),
+        n_observed=int(r["n_observed"][0]),
         cv_error=readonly(cv[~np.isnan(cv)].copy()),
         covariance=None if r["covariance"][0] is None else readonly(r["covariance"][0]),
         span=tuple(float(v) for v in r["span"]),  # type: ignore[arg-type]
@@ -373,41 +415,29 @@ def reconstruct_trajectory(
 def reconstruct_trajectories(
     x: npt.ArrayLike,
     cameras: Cameras,
-    k: int | Literal["auto"] = "auto",
-    folds: int = 5,
-    k_max: int | None = None,
-    refine: bool = True,
     *,
-    k_min: int = 1,
-    cv_rule: Literal["min", "1se"] = "min",
-    max_iterations: int = 100,
+    options: TrajectoryOptions | None = None,
+    strict: bool = False,
+    **overrides: Any,
 ) -> TrajectoryBatch:
     """Reconstructs ``N`` moving points that share the cameras, each with its own missing
     pattern and its own ``K``; in parallel over points.
 
     Parameters are those of :func:`reconstruct_trajectory`, with ``x`` of shape
     ``(N, F, 2)``. A point that cannot be reconstructed (degenerate, all missing) does not
-    stop the batch: its rows are NaN and ``failures[i]`` says why.
+    stop the batch: its rows are NaN and ``failures[i]`` says why. Ctrl-C stops the batch
+    (``KeyboardInterrupt``). ``strict=True`` raises :class:`ConvergenceError` when a
+    reconstructed point's refinement hit ``max_iter``.
 
     Returns
     -------
     TrajectoryBatch
     """
-    f = len(cameras) if isinstance(cameras, Cameras) else None
-    x_ = as_float_array(x, "x", (None, f, 2), allow_nan=True)
-    r = _run(
-        x_,
-        cameras,
-        k,
-        folds,
-        k_max,
-        refine,
-        k_min,
-        cv_rule,
-        max_iterations,
-        keep_covariance=False,
-        strict=False,
-    )
+    opts = apply_overrides(options, TrajectoryOptions, overrides)
+    cams, times = _cameras_arg(cameras)
+    x_ = as_float_array(x, "x", (None, len(cams), 2), allow_nan=True)
+    r = _run(x_, cams, times, opts, keep_covariance=False, strict=False)
+    _check_converged(r, opts, strict)
     return TrajectoryBatch(
         points=readonly(r["points"]),
         k=readonly(r["k"]),
@@ -420,7 +450,7 @@ def reconstruct_trajectories(
         rank=readonly(r["rank"]),
         cond=readonly(r["cond"]),
         sigma=readonly(r["sigma"]),
-        observed=readonly(r["observed"]),
+        n_observed=readonly(r["n_observed"]),
         cv_error=readonly(r["cv_error"]),
         failures=list(r["failures"]),
         span=tuple(float(v) for v in r["span"]),  # type: ignore[arg-type]
@@ -428,18 +458,22 @@ def reconstruct_trajectories(
 
 
 def reconstructability(
-    points_true: npt.ArrayLike,
+    points: npt.ArrayLike,
     camera_centres: npt.ArrayLike,
     k: int,
+    *,
     times: npt.ArrayLike | None = None,
 ) -> float:
     """Reconstructability η (Eq 5.16): ``‖Θ^⊥β_C^⊥‖ / ‖Θ^⊥β_X^⊥‖``, how poorly ``k`` DCT
     functions describe the camera trajectory relative to the point trajectory. Large η
     means an accurate reconstruction (Theorem 3); an analysis tool, as it needs the truth.
 
+    Arguments in the order of every reconstruction call: the trajectory, then the cameras,
+    then ``k`` (as :func:`socialcam.articulated_reconstructability`).
+
     Parameters
     ----------
-    points_true : array_like, shape (F, 3)
+    points : array_like, shape (F, 3)
         The true point trajectory (metres).
     camera_centres : array_like, shape (F, 3)
         The camera centre of each frame.
@@ -454,19 +488,19 @@ def reconstructability(
         η; ``0`` when the basis describes the camera trajectory exactly (e.g. a still
         camera), ``inf`` when it describes the point's exactly but not the camera's.
     """
-    p = as_float_array(points_true, "points_true", (None, 3))
+    p = as_float_array(points, "points", (None, 3))
     c = as_float_array(camera_centres, "camera_centres", (None, 3))
     t = None if times is None else as_float_array(times, "times", (None,))
-    if isinstance(k, bool) or not isinstance(k, (int, np.integer)):
-        raise ValueError(f"k: expected a positive integer, got {k!r}")
-    return float(_core.reconstructability(p, c, int(k), t))
+    kk = check_int(k, "k", min=1, max=max(len(p), 1))
+    return float(_core.reconstructability(p, c, kk, t))
 
 
-def null_residual(trajectory: npt.ArrayLike, k: int, times: npt.ArrayLike | None = None) -> float:
+def null_residual(
+    trajectory: npt.ArrayLike, k: int, *, times: npt.ArrayLike | None = None
+) -> float:
     """``‖Θ^⊥ β^⊥‖``: the part of a trajectory ``(F, 3)`` that ``k`` DCT functions cannot
     describe (``e_X`` or ``e_C`` of Sec 5.2.2), in metres."""
     p = as_float_array(trajectory, "trajectory", (None, 3))
     t = None if times is None else as_float_array(times, "times", (None,))
-    if isinstance(k, bool) or not isinstance(k, (int, np.integer)):
-        raise ValueError(f"k: expected a positive integer, got {k!r}")
-    return float(_core.null_residual(p, int(k), t))
+    kk = check_int(k, "k", min=1, max=max(len(p), 1))
+    return float(_core.null_residual(p, kk, t))

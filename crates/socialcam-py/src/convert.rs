@@ -4,7 +4,7 @@
 
 use nalgebra::{Matrix3, Vector3};
 use numpy::{PyReadonlyArray1, PyReadonlyArray2, PyReadonlyArray3};
-use pyo3::exceptions::PyValueError;
+use pyo3::exceptions::{PyTypeError, PyValueError};
 use pyo3::prelude::*;
 use socialcore::geometry::Camera;
 
@@ -78,4 +78,12 @@ pub fn cameras(
             ))
         })
         .collect()
+}
+
+/// Reads an options dataclass (`socialcam.TrajectoryOptions`, `GazeFieldOptions`) by its
+/// attributes; anything else (None, a missing field, a field of the wrong type) is a
+/// `TypeError` naming `options` rather than a bare `AttributeError`.
+pub fn options<'py, T: FromPyObject<'py>>(obj: &Bound<'py, PyAny>, what: &str) -> PyResult<T> {
+    obj.extract::<T>()
+        .map_err(|e| PyTypeError::new_err(format!("options: expected a {what}: {e}")))
 }

@@ -211,6 +211,11 @@ fn gaze_init<'py>(
     }
     let imax = wins.iter().map(|w| w.n_charges).max().unwrap_or(0);
     let nf = frames.len();
+    map(socialcore::error::ensure_alloc(
+        "windows",
+        &[nf, imax, 3],
+        8,
+    ))?;
     let rows_w = detach(py, || {
         wins.par_iter()
             .map(|w| {
@@ -248,14 +253,36 @@ type EmOut<'py> = (
     Bound<'py, PyArray1<bool>>,
 );
 
-/// Time-windowed EM (Eq 7.10–7.14) on every window in parallel. Returns positions
-/// `(F,I,3)`, magnitudes `(F,I)` (NaN where no charge), κ per window `(W,)`, window
-/// memberships `(W,J,I)`, responsibilities `(N,I)`, log-likelihood `(W,)`, iterations
-/// `(W,)`, converged `(W,)`. Windows with `n = 0` are skipped (NaN, 0 iterations).
+/// The EM fields of `socialcam.GazeFieldOptions` (the frozen dataclass validated in
+/// Python), read by attribute so the option list is written once. Angles in radians.
+#[derive(FromPyObject)]
+pub struct PyGazeEmOptions {
+    #[pyo3(attribute)]
+    kappa: Option<f64>,
+    #[pyo3(attribute)]
+    kappa_init: Option<f64>,
+    #[pyo3(attribute)]
+    max_iter: usize,
+    #[pyo3(attribute)]
+    tol: f64,
+    #[pyo3(attribute)]
+    max_angle: f64,
+    #[pyo3(attribute)]
+    inner_iterations: usize,
+    #[pyo3(attribute)]
+    lambda_g: f64,
+    #[pyo3(attribute)]
+    temporal_filter: String,
+    #[pyo3(attribute)]
+    membership: String,
+}
+
+/// Time-windowed EM (Eq 7.10–7.14) on every window in parallel, with the options of a
+/// `socialcam.GazeFieldOptions`. Returns positions `(F,I,3)`, magnitudes `(F,I)` (NaN
+/// where no charge), κ per window `(W,)`, window memberships `(W,J,I)`, responsibilities
+/// `(N,I)`, log-likelihood `(W,)`, iterations `(W,)`, converged `(W,)`. Windows with
+/// `n = 0` are skipped (NaN, 0 iterations).
 #[pyfunction]
-#[pyo3(signature = (p, v, members, offsets, windows, init, kappa=None, kappa_init=10.0,
-    max_iterations=200, tolerance=1e-7, max_angle=0.5235987755982988, inner_iterations=5,
-    lambda_g=0.0, filter="velocity", membership="window"))]
 #[allow(clippy::too_many_arguments)]
 fn gaze_em<'py>(
     py: Python<'py>,
@@ -265,16 +292,9 @@ fn gaze_em<'py>(
     offsets: PyReadonlyArray1<'py, i64>,
     windows: PyReadonlyArray2<'py, i64>,
     init: PyReadonlyArray3<'py, f64>,
-    kappa: Option<f64>,
-    kappa_init: f64,
-    max_iterations: usize,
-    tolerance: f64,
-    max_angle: f64,
-    inner_iterations: usize,
-    lambda_g: f64,
-    filter: &str,
-    membership: &str,
+    options: Bound<'py, PyAny>,
 ) -> PyResult<EmOut<'py>> {
+    let options: PyGazeEmOptions = crate::convert::options(&options, "GazeFieldOptions")?;
     let frames = frames_of(&p, &v, Some(&members), &offsets)?;
     let wins = windows_of(&windows, frames.len())?;
     let init_rows = padded_rows(&init, "init")?;
@@ -283,16 +303,17 @@ fn gaze_em<'py>(
             "init: need one (I, 3) row block per frame",
         ));
     }
-    let filter = match filter {
+    let o = options;
+    let filter = match o.temporal_filter.as_str() {
         "velocity" => TemporalFilter::Velocity,
         "acceleration" => TemporalFilter::Acceleration,
         other => {
             return Err(PyValueError::new_err(format!(
-                "filter: expected 'velocity' or 'acceleration', got {other:?}"
+                "temporal_filter: expected 'velocity' or 'acceleration', got {other:?}"
             )))
         }
     };
-    let membership = match membership {
+    let membership = match o.membership.as_str() {
         "window" => Membership::PerWindow,
         "frame" => Membership::PerFrame,
         other => {
@@ -302,17 +323,17 @@ fn gaze_em<'py>(
         }
     };
     let opts = EmOptions {
-        kappa: match kappa {
+        kappa: match o.kappa {
             Some(k) => Kappa::Fixed(k),
             None => Kappa::Estimate {
-                initial: kappa_init,
+                initial: o.kappa_init.unwrap_or(10.0),
             },
         },
-        max_iterations,
-        tolerance,
-        max_angle,
-        inner_iterations,
-        lambda_g,
+        max_iterations: o.max_iter,
+        tolerance: o.tol,
+        max_angle: o.max_angle,
+        inner_iterations: o.inner_iterations,
+        lambda_g: o.lambda_g,
         filter,
         membership,
     };
@@ -340,17 +361,27 @@ fn gaze_em<'py>(
             },
         ));
     }
-    let job_list: Vec<gf::WindowJob> = jobs.iter().map(|(_, j)| j.clone()).collect();
-    let fits = detach(py, || gf::em_windows(&frames, &job_list, &opts))?;
-    let nf = frames.len();
-    let n_rays: usize = frames.iter().map(|f| f.rays.len()).sum();
+    let imax = wins.iter().map(|w| w.n_charges).max().unwrap_or(0);
     let n_members = frames
         .iter()
         .flat_map(|f| f.members.iter())
         .map(|m| m + 1)
         .max()
         .unwrap_or(0);
-    let imax = wins.iter().map(|w| w.n_charges).max().unwrap_or(0);
+    map(socialcore::error::ensure_alloc(
+        "windows",
+        &[frames.len(), imax, 3],
+        8,
+    ))?;
+    map(socialcore::error::ensure_alloc(
+        "members",
+        &[wins.len(), n_members, imax],
+        8,
+    ))?;
+    let job_list: Vec<gf::WindowJob> = jobs.iter().map(|(_, j)| j.clone()).collect();
+    let fits = detach(py, || gf::em_windows(&frames, &job_list, &opts))?;
+    let nf = frames.len();
+    let n_rays: usize = frames.iter().map(|f| f.rays.len()).sum();
     let nw = wins.len();
     let mut pos = Array3::<f64>::from_elem((nf, imax, 3), f64::NAN);
     let mut mag = Array2::<f64>::from_elem((nf, imax), f64::NAN);

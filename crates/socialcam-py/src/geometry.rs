@@ -54,9 +54,10 @@ fn project<'py>(
     x: PyReadonlyArray2<'py, f64>,
 ) -> PyResult<(Bound<'py, PyArray3<f64>>, Bound<'py, PyArray2<f64>>)> {
     let cams = cameras(&k, &r, &c)?;
-    let (xf, n) = rows(&x, "X", 3)?;
-    map(socialcore::error::ensure_finite("X", &xf))?;
+    let (xf, n) = rows(&x, "points", 3)?;
+    map(socialcore::error::ensure_finite("points", &xf))?;
     let f = cams.len();
+    map(socialcore::error::ensure_alloc("points", &[f, n, 2], 8))?;
     let (px, depth) = py.detach(|| {
         let per: Vec<(Vec<f64>, Vec<f64>)> = cams
             .par_iter()
@@ -134,7 +135,7 @@ type TriOut<'py> = (
 /// `(N,)` in pixels, the number of views `(N,)`, `converged (N,)` and, per point, `None` or
 /// the reason it failed.
 #[pyfunction]
-#[pyo3(signature = (k, r, c, x, refine=true, max_iterations=50))]
+#[pyo3(signature = (k, r, c, x, refine=true, max_iter=50))]
 fn triangulate<'py>(
     py: Python<'py>,
     k: PyReadonlyArray3<'py, f64>,
@@ -142,7 +143,7 @@ fn triangulate<'py>(
     c: PyReadonlyArray2<'py, f64>,
     x: PyReadonlyArray3<'py, f64>,
     refine: bool,
-    max_iterations: usize,
+    max_iter: usize,
 ) -> PyResult<TriOut<'py>> {
     let cams = cameras(&k, &r, &c)?;
     let xv = x.as_array();
@@ -164,7 +165,7 @@ fn triangulate<'py>(
         ));
     }
     let opts = LmOptions {
-        max_iterations,
+        max_iterations: max_iter,
         ..LmOptions::default()
     };
     let results = detach(py, || g::triangulate_batch(&cams, &flat, n, refine, &opts))?;

@@ -3,7 +3,7 @@
 //! `x (N,F,2)` with NaN rows where a point was not seen. Results come back as a dict of
 //! arrays (wrapped into dataclasses by `socialcam.trajectory`): `points (N,F,3)`,
 //! `std (N,F,3)`, `coeffs (N,Kmax,3)` (zero beyond each point's `k`), `k`, `rms`,
-//! `rms_linear`, `converged`, `iterations`, `rank`, `cond`, `sigma`, `observed` (all `(N,)`),
+//! `rms_linear`, `converged`, `iterations`, `rank`, `cond`, `sigma`, `n_observed` (all `(N,)`),
 //! `cv_error (N,Kcv)` (NaN padded), `covariance` (list of `(3k,3k)` arrays or `None`),
 //! `failures` (per point `None` or the reason), `span (t0, t1, n_norm)`.
 
@@ -21,18 +21,35 @@ use socialcore::trajectory::{
 use crate::convert::{cameras, rows, vec1, vec3};
 use crate::errors::{detach, map};
 
-#[allow(clippy::too_many_arguments)]
-fn options(
-    k: Option<usize>,
+/// `K` as the options hold it: a positive integer or `"auto"`.
+#[derive(FromPyObject)]
+enum KArg {
+    Fixed(usize),
+    Auto(String),
+}
+
+/// The fields of `socialcam.TrajectoryOptions` (the frozen dataclass validated in Python),
+/// read by attribute so the option list is written once.
+#[derive(FromPyObject)]
+pub struct PyTrajectoryOptions {
+    #[pyo3(attribute)]
+    k: KArg,
+    #[pyo3(attribute)]
     folds: usize,
+    #[pyo3(attribute)]
     k_min: usize,
+    #[pyo3(attribute)]
     k_max: Option<usize>,
-    cv_rule: &str,
+    #[pyo3(attribute)]
+    cv_rule: String,
+    #[pyo3(attribute)]
     refine: bool,
-    max_iterations: usize,
-    keep_covariance: bool,
-) -> PyResult<TrajectoryOptions> {
-    let rule = match cv_rule {
+    #[pyo3(attribute)]
+    max_iter: usize,
+}
+
+fn options(o: &PyTrajectoryOptions, keep_covariance: bool) -> PyResult<TrajectoryOptions> {
+    let rule = match o.cv_rule.as_str() {
         "min" => CvRule::Min,
         "1se" => CvRule::OneStandardError,
         other => {
@@ -41,20 +58,25 @@ fn options(
             )))
         }
     };
-    let sel = match k {
-        Some(k) => KSelection::Fixed(k),
-        None => KSelection::CrossValidation {
-            folds,
-            k_min,
-            k_max,
+    let sel = match &o.k {
+        KArg::Fixed(k) => KSelection::Fixed(*k),
+        KArg::Auto(s) if s == "auto" => KSelection::CrossValidation {
+            folds: o.folds,
+            k_min: o.k_min,
+            k_max: o.k_max,
             rule,
         },
+        KArg::Auto(s) => {
+            return Err(PyValueError::new_err(format!(
+                "k: expected a positive integer or 'auto', got {s:?}"
+            )))
+        }
     };
     let opts = TrajectoryOptions {
         k: sel,
-        refine,
+        refine: o.refine,
         lm: LmOptions {
-            max_iterations,
+            max_iterations: o.max_iter,
             rel_tol: 1e-10,
         },
         keep_covariance,
@@ -176,19 +198,19 @@ fn pack<'py>(
     d.set_item("rank", rank.into_pyarray(py))?;
     d.set_item("cond", cond.into_pyarray(py))?;
     d.set_item("sigma", sigma.into_pyarray(py))?;
-    d.set_item("observed", observed.into_pyarray(py))?;
+    d.set_item("n_observed", observed.into_pyarray(py))?;
     d.set_item("covariance", covs)?;
     d.set_item("failures", failures)?;
     d.set_item("span", (span.t0, span.t1, span.n_norm))?;
     Ok(d)
 }
 
-/// Reconstructs `N` point trajectories `x (N,F,2)` from cameras with capture times.
-/// `k=None` chooses `K` per point by cross validation. A point that cannot be reconstructed
+/// Reconstructs `N` point trajectories `x (N,F,2)` from cameras with capture times, with
+/// the options of a `socialcam.TrajectoryOptions`. A point that cannot be reconstructed
 /// gets NaN rows and its reason in `failures`; with `strict=True` the first failure is
 /// raised instead (`DegenerateError` or `ValueError`).
 #[pyfunction]
-#[pyo3(signature = (k_intr, r, c, times, x, k=None, folds=5, k_min=1, k_max=None, cv_rule="min", refine=true, max_iterations=100, keep_covariance=false, strict=false))]
+#[pyo3(signature = (k_intr, r, c, times, x, options, keep_covariance=false, strict=false))]
 #[allow(clippy::too_many_arguments)]
 fn reconstruct_trajectories<'py>(
     py: Python<'py>,
@@ -197,26 +219,12 @@ fn reconstruct_trajectories<'py>(
     c: PyReadonlyArray2<'py, f64>,
     times: PyReadonlyArray1<'py, f64>,
     x: PyReadonlyArray3<'py, f64>,
-    k: Option<usize>,
-    folds: usize,
-    k_min: usize,
-    k_max: Option<usize>,
-    cv_rule: &str,
-    refine: bool,
-    max_iterations: usize,
+    options: Bound<'py, PyAny>,
     keep_covariance: bool,
     strict: bool,
 ) -> PyResult<Bound<'py, PyDict>> {
-    let opts = options(
-        k,
-        folds,
-        k_min,
-        k_max,
-        cv_rule,
-        refine,
-        max_iterations,
-        keep_covariance,
-    )?;
+    let o: PyTrajectoryOptions = crate::convert::options(&options, "TrajectoryOptions")?;
+    let opts = self::options(&o, keep_covariance)?;
     let fr = frames(&k_intr, &r, &c, &times)?;
     let (flat, n) = pixels(&x, fr.len())?;
     let results = detach(py, || {

@@ -107,6 +107,7 @@ impl DctSpan {
         if k == 0 {
             return Err(Error::invalid("k", "must be at least 1"));
         }
+        crate::error::ensure_alloc("k", &[times.len(), k], std::mem::size_of::<f64>())?;
         let mut m = DMatrix::zeros(times.len(), k);
         let mut row = vec![0.0; k];
         for (i, &t) in times.iter().enumerate() {

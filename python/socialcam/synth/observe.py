@@ -36,7 +36,7 @@ class Observations:
     @property
     def missing(self) -> npt.NDArray[np.bool_]:
         """``(N, F)`` true where the observation is missing."""
-        return np.isnan(self.x).any(axis=-1)
+        return np.asarray(np.isnan(self.x).any(axis=-1), dtype=bool)
 
     def to_dict(self) -> dict[str, Any]:
         return {"x": self.x.tolist(), "points": self.points.tolist(), "noise_px": self.noise_px}

@@ -144,7 +144,7 @@ impl EmOptions {
     pub fn validate(&self) -> Result<()> {
         validate_kappa(self.kappa.initial())?;
         if !(self.tolerance.is_finite() && self.tolerance > 0.0) {
-            return Err(Error::invalid("tolerance", "must be finite and > 0"));
+            return Err(Error::invalid("tol", "must be finite and > 0"));
         }
         if !(self.max_angle > 0.0 && self.max_angle < std::f64::consts::FRAC_PI_2) {
             return Err(Error::invalid("max_angle", "must lie in (0, pi/2) radians"));
@@ -154,7 +154,7 @@ impl EmOptions {
         }
         if self.max_iterations == 0 || self.inner_iterations == 0 {
             return Err(Error::invalid(
-                "max_iterations",
+                "max_iter, inner_iterations",
                 "iteration counts must be at least 1",
             ));
         }
@@ -445,9 +445,11 @@ fn validate_window(frames: &[WindowFrame], init: &[Vec<Vector3<f64>>]) -> Result
             ));
         }
         if let Some(m) = seen.last() {
-            n_members = n_members.max(m + 1);
+            n_members = n_members.max(m.saturating_add(1));
         }
     }
+    // Member indices are dense (0..J): a huge index would allocate a huge membership table.
+    crate::error::ensure_alloc("members", &[n_members, n_charges], 8)?;
     Ok((n_members, n_charges))
 }
 
@@ -503,9 +505,9 @@ pub fn em_window(
 ) -> Result<WindowFit> {
     opts.validate()?;
     let (n_members, n_charges) = validate_window(frames, init)?;
-    Ok(em_window_unchecked(
-        frames, init, opts, n_members, n_charges,
-    ))
+    let fit = em_window_unchecked(frames, init, opts, n_members, n_charges);
+    crate::interrupt::check()?;
+    Ok(fit)
 }
 
 fn em_window_unchecked(
@@ -654,7 +656,8 @@ fn em_window_unchecked(
                 break;
             }
         }
-        if iterations >= opts.max_iterations {
+        // Ctrl-C: stop after this E-step; `em_window` turns it into `Interrupted`.
+        if iterations >= opts.max_iterations || crate::interrupt::requested() {
             break;
         }
         iterations += 1;

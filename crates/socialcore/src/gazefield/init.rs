@@ -47,6 +47,13 @@ pub fn init_charges(rays: &[GazeRay], n: usize, sigma: f64) -> Result<Vec<Vector
     if !(sigma.is_finite() && sigma > 0.0) {
         return Err(Error::invalid("sigma", "must be finite and > 0"));
     }
+    if n > rays.len() {
+        // More charges than gazes: the extra charges could only repeat the others.
+        return Err(Error::degenerate(format!(
+            "{n} social charges cannot be placed with {} gaze rays",
+            rays.len()
+        )));
+    }
     validate_rays("rays", rays)?;
     let mut cands = Vec::new();
     for a in 0..rays.len() {

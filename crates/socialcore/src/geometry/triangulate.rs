@@ -255,9 +255,11 @@ pub fn triangulate_batch(
     if v == 0 {
         return Err(Error::invalid("cameras", "no cameras"));
     }
-    Ok(pixels
+    // Ctrl-C: points not yet started are skipped once a stop is requested.
+    let out: Vec<Result<Triangulated>> = pixels
         .par_chunks(v * 2)
         .map(|row| {
+            crate::interrupt::check()?;
             let obs: Vec<Option<Vector2<f64>>> = row
                 .chunks(2)
                 .map(|p| {
@@ -270,7 +272,9 @@ pub fn triangulate_batch(
                 .collect();
             triangulate_point(cameras, &obs, refine, opts)
         })
-        .collect())
+        .collect();
+    crate::interrupt::check()?;
+    Ok(out)
 }
 
 #[cfg(test)]

@@ -81,6 +81,10 @@ pub(crate) fn select_k(
     let (mut mat, mut rhs) = (Vec::new(), Vec::new());
     let mut beta = vec![0.0; nu];
     for (j, held) in members.iter().enumerate() {
+        // Ctrl-C: stop between folds; the caller checks the flag and discards the result.
+        if crate::interrupt::requested() {
+            break;
+        }
         let train = &total - &raws[j];
         scatter_gram(train.as_ref(), k_hi, &mut mat, &mut rhs);
         let n_train = n - held.len();

@@ -183,7 +183,7 @@ impl TrajectoryOptions {
             }
         }
         if self.lm.max_iterations == 0 && self.refine {
-            return Err(Error::invalid("max_iterations", "must be at least 1"));
+            return Err(Error::invalid("max_iter", "must be at least 1"));
         }
         if !(self.lm.rel_tol.is_finite() && self.lm.rel_tol >= 0.0) {
             return Err(Error::invalid(
@@ -197,10 +197,16 @@ impl TrajectoryOptions {
     /// The largest `K` any point of an `F`-frame sequence can use under these options.
     fn k_cap(&self, frames: usize) -> usize {
         match self.k {
-            KSelection::Fixed(k) => k,
+            // A point has at most `F` observations, so `K > F` fails every point (2F̂ < 3K)
+            // before the table is read: no need to build columns it will never use.
+            KSelection::Fixed(k) => k.min(frames.max(1)),
             KSelection::CrossValidation { k_min, k_max, .. } => {
                 let thesis = (2 * frames) / 3;
-                k_max.unwrap_or(thesis).min(thesis).max(k_min)
+                k_max
+                    .unwrap_or(thesis)
+                    .min(thesis)
+                    .max(k_min)
+                    .min(frames.max(1))
             }
         }
     }
@@ -453,10 +459,17 @@ pub fn reconstruct_trajectories(
         ));
     }
     let table = BasisTable::new(frames, opts.k_cap(f));
-    Ok(pixels
-        .par_chunks(2 * f)
-        .map(|row| solve_point(frames, &table, row, opts))
-        .collect())
+    // Ctrl-C: points not yet started are skipped once a stop is requested, and the
+    // refinement and cross-validation loops of running points stop early.
+    let out: Vec<Result<TrajectoryFit>> = pixels
+        .par_chunks(2 * f.max(1))
+        .map(|row| {
+            crate::interrupt::check()?;
+            solve_point(frames, &table, row, opts)
+        })
+        .collect();
+    crate::interrupt::check()?;
+    Ok(out)
 }
 
 /// Tolerance on camera-centre spread (relative to the scene's coordinate magnitude) below
@@ -476,13 +489,13 @@ fn solve_point(
         KSelection::Fixed(k) => k,
         KSelection::CrossValidation { k_min, .. } => k_min,
     };
-    if 2 * n < 3 * k_floor {
+    if 2 * n < k_floor.saturating_mul(3) {
         return Err(Error::degenerate(format!(
             "too few observations for K = {k_floor} (k): {n} observed frames give {} equations \
              for {} unknowns; need at least {} observations",
             2 * n,
-            3 * k_floor,
-            (3 * k_floor).div_ceil(2)
+            k_floor.saturating_mul(3),
+            k_floor.saturating_mul(3).div_ceil(2)
         )));
     }
     // A still camera sees every point on fixed rays: depth is unobservable for any K
@@ -515,6 +528,8 @@ fn solve_point(
         } => {
             let k_hi = k_max.unwrap_or(usize::MAX).min((2 * n) / 3).min(table.kc);
             let cv = cv::select_k(frames, table, &sys, folds, k_min, k_hi, rule);
+            // Cross validation stops early on Ctrl-C: do not use its partial answer.
+            crate::interrupt::check()?;
             (cv.k.unwrap_or(k_min), cv.errors)
         }
     };
@@ -533,6 +548,7 @@ fn solve_point(
     let rms_linear = refine::rms(frames, &theta, &sys, &beta);
     let (converged, iterations) = if opts.refine {
         let r = refine::refine(frames, &theta, &sys, &beta, &opts.lm);
+        crate::interrupt::check()?;
         beta = r.beta;
         (r.converged, r.iterations)
     } else {

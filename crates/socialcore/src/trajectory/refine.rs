@@ -130,6 +130,10 @@ pub(crate) fn refine(
     let mut a = vec![0.0; nu * nu];
     let mut step = vec![0.0; nu];
     for it in 0..opts.max_iterations {
+        // Ctrl-C: stop here; the caller checks the flag and discards this partial answer.
+        if crate::interrupt::requested() {
+            break;
+        }
         if c == 0.0 {
             return Refined {
                 beta,

@@ -573,3 +573,15 @@ fn init_finds_exact_intersections() {
         assert!(nearest < 1e-9, "{nearest}");
     }
 }
+
+#[test]
+fn init_refuses_more_charges_than_rays() {
+    let mut rng = ChaCha8Rng::seed_from_u64(22);
+    let s = two_groups(&mut rng, f64::INFINITY, &centres(), &[3, 3]);
+    // 50 charges from 6 gaze rays could only repeat the same few points.
+    assert!(matches!(
+        init_charges(&s.rays, 50, 0.1),
+        Err(Error::Degenerate(_))
+    ));
+    assert_eq!(init_charges(&s.rays, 6, 0.1).map(|v| v.len()), Ok(6));
+}

@@ -1,0 +1,269 @@
+"""Sizes refused before allocating, Ctrl-C in every long call, silent wrong answers turned
+into errors, and output files that respect the umask (issue 13)."""
+
+from __future__ import annotations
+
+import os
+import signal
+import stat
+import threading
+import time
+from collections.abc import Callable
+from typing import Any
+
+import numpy as np
+import pytest
+from _scenes import ring
+
+import socialcam as sc
+from socialcam import _core, io
+
+# ----------------------------------------------------------------------------- helpers
+
+
+def gaze_frames(n_frames: int, n_people: int = 6, seed: int = 0) -> list[tuple[Any, Any]]:
+    """People on a circle looking at a slowly moving point, with a little noise."""
+    rng = np.random.default_rng(seed)
+    ang = np.linspace(0, 2 * np.pi, n_people, endpoint=False)
+    p = np.c_[2 * np.cos(ang), 2 * np.sin(ang), np.full(n_people, 1.6)]
+    frames = []
+    for t in range(n_frames):
+        target = np.array([0.3 * np.sin(0.05 * t), 0.2, 1.0])
+        v = target - p + rng.normal(scale=0.05, size=p.shape)
+        frames.append((p, v / np.linalg.norm(v, axis=1, keepdims=True)))
+    return frames
+
+
+def interrupted(fn: Callable[[], object], delay: float = 0.5) -> float:
+    """Runs ``fn`` and sends SIGINT to the main thread after ``delay`` seconds; asserts
+    ``KeyboardInterrupt`` and returns the latency from the signal to the exception."""
+    sent: list[float] = []
+
+    def fire() -> None:
+        sent.append(time.perf_counter())
+        signal.pthread_kill(threading.main_thread().ident or 0, signal.SIGINT)
+
+    timer = threading.Timer(delay, fire)
+    timer.start()
+    try:
+        with pytest.raises(KeyboardInterrupt):
+            fn()
+    finally:
+        timer.cancel()
+    assert sent, "the call returned before the interrupt was sent: make it longer"
+    latency = time.perf_counter() - sent[0]
+    print(f"Ctrl-C latency: {latency * 1e3:.0f} ms")
+    return latency
+
+
+#: Ctrl-C must stop a call within this many seconds (measured: < 0.1 s on a loaded
+#: machine with a dev build; the binding polls signals every 20 ms).
+LATENCY = 2.0
+
+
+# ----------------------------------------------------------------------------- sizes
+
+
+def test_dct_basis_size_is_checked_before_allocating():
+    t = np.linspace(0, 1, 100)
+    with pytest.raises(ValueError, match=r"^k: too large"):
+        sc.dct_basis(t, 10**9)
+    with pytest.raises(ValueError, match=r"^k: too large"):
+        _core.dct_basis(t, 10**9)  # the kernel checks too
+    assert sc.dct_basis(t, 300).shape == (100, 300)  # k > F is a valid request
+
+
+def test_project_size_is_checked_before_allocating():
+    cams = ring(10_000)
+    with pytest.raises(ValueError, match=r"^points: too large"):
+        cams.project(np.zeros((100_000, 3)))
+    with pytest.raises(ValueError, match=r"^points: too large"):
+        _core.project(cams.K, cams.R, cams.C, np.zeros((100_000, 3)))
+
+
+def test_trajectory_k_beyond_frames_does_not_allocate():
+    cams = ring(20)
+    x = np.zeros((1, 20, 2))
+    # The kernel used to allocate an F × k basis table before noticing K is impossible.
+    b = _core.reconstruct_trajectories(
+        cams.K,
+        cams.R,
+        cams.C,
+        cams.times,
+        x,
+        sc.TrajectoryOptions(k=2**62),
+    )
+    assert b["failures"][0] is not None
+    with pytest.raises(sc.DegenerateError, match="too few observations"):
+        sc.reconstruct_trajectory(np.ones((20, 2)), cams, k=2**62)
+
+
+def test_gaze_sizes_are_checked():
+    frames = gaze_frames(3)
+    with pytest.raises(ValueError, match=r"^n_charges: 1000000000000 charges"):
+        sc.GazeField.fit(frames, n_charges=10**12)
+    flat_p = np.concatenate([f[0] for f in frames])
+    flat_v = np.concatenate([f[1] for f in frames])
+    off = np.array([0, 6, 12, 18], dtype=np.int64)
+    win = np.array([[0, 3, 10**12]], dtype=np.int64)
+    with pytest.raises(ValueError, match=r"^windows: too large"):
+        _core.gaze_init(flat_p, flat_v, off, win, 0.25)
+
+
+# ----------------------------------------------------------------------------- Ctrl-C
+
+
+def test_ctrl_c_stops_batched_triangulation():
+    cams = ring(6)
+    rng = np.random.default_rng(1)
+    X = rng.normal(scale=0.5, size=(2_000, 3))
+    x = np.ascontiguousarray(cams.project(X).transpose(1, 0, 2))
+    x = np.tile(x, (600, 1, 1)) + rng.normal(scale=0.5, size=(1_200_000, 6, 2))
+    lat = interrupted(lambda: sc.triangulate(x, cams, max_iter=200))
+    assert lat < LATENCY
+    # The flag is cleared: the next call runs normally.
+    assert np.isfinite(sc.triangulate(x[:10], cams)).all()
+
+
+def test_ctrl_c_stops_trajectory_cross_validation():
+    f = 400
+    cams = ring(f, seed=2)
+    rng = np.random.default_rng(2)
+    t = cams.times
+    X = np.stack(
+        [np.c_[np.sin(t * w), np.cos(t * 0.7 * w), 0.2 * t] for w in rng.uniform(0.5, 3, 4_000)]
+    )
+    x = cams.project_trajectory(X) + rng.normal(scale=0.5, size=(4_000, f, 2))
+    lat = interrupted(lambda: sc.reconstruct_trajectories(x, cams, k_max=80))
+    assert lat < LATENCY
+    assert sc.reconstruct_trajectories(x[:2], cams, k=5).ok.all()
+
+
+def test_ctrl_c_stops_trajectory_refinement():
+    f = 400
+    cams = ring(f, seed=3)
+    rng = np.random.default_rng(3)
+    t = cams.times
+    X = np.stack([np.c_[np.sin(t * w), np.cos(t * w), 0.1 * t] for w in rng.uniform(1, 3, 4_000)])
+    x = cams.project_trajectory(X) + rng.normal(scale=2.0, size=(4_000, f, 2))
+    lat = interrupted(lambda: sc.reconstruct_trajectories(x, cams, k=60, max_iter=10**6))
+    assert lat < LATENCY
+
+
+def test_ctrl_c_stops_gaze_field_em():
+    frames = gaze_frames(3_000, n_people=8)
+    p = np.concatenate([f[0] for f in frames])
+    v = np.concatenate([f[1] for f in frames])
+    off = np.arange(0, 8 * 3_000 + 1, 8, dtype=np.int64)
+    members = np.tile(np.arange(8, dtype=np.int64), 3_000)
+    windows = np.array([[0, 3_000, 2]], dtype=np.int64)
+    init = _core.gaze_init(p, v, off, windows, 0.25)
+    # A tiny tol and a huge cap: the EM would run for hours without the interrupt. The
+    # kernel is called directly so that the signal lands inside the EM, not in the setup.
+    opts = sc.GazeFieldOptions(kappa=30.0, tol=1e-300, max_iter=10**9)
+    lat = interrupted(lambda: _core.gaze_em(p, v, members, off, windows, init, opts))
+    assert lat < LATENCY
+    assert sc.GazeField.fit(frames[:5], n_charges=1, kappa=30.0).converged.all()
+
+
+def test_ctrl_c_stops_gaze_field_fit():
+    frames = gaze_frames(3_000, n_people=8)
+    lat = interrupted(
+        lambda: sc.GazeField.fit(frames, n_charges=2, kappa=30.0, tol=1e-300, max_iter=10**9),
+        delay=3.0,
+    )
+    assert lat < LATENCY
+
+
+# ----------------------------------------------------------------------------- silent wrong answers
+
+
+def test_perspective_distance_refuses_non_unit_directions():
+    p = np.zeros((2, 3))
+    v = np.array([[0.0, 0, 1], [0, 0, 2]])
+    with pytest.raises(ValueError, match=r"^v: direction 1 has norm 2"):
+        sc.perspective_distance(p, v, np.ones((2, 3)))
+    d = sc.perspective_distance(p, v / [[1], [2]], np.array([[1.0, 0, 1], [0, 1, 2]]))
+    np.testing.assert_allclose(d, [[1.0, 0, 0], [0, 0.5, 0]], atol=1e-12)
+
+
+def test_trajectory_at_outside_the_span_raises():
+    cams = ring(30, seed=4)
+    t = cams.times
+    X = np.c_[np.sin(t), np.cos(t), 0.1 * t]
+    tr = sc.reconstruct_trajectory(cams.project_trajectory(X), cams, k=4)
+    t0, t1, _ = tr.span
+    inside = tr.at(np.linspace(t0, t1, 5))
+    assert np.isfinite(inside).all()
+    with pytest.raises(ValueError, match=r"^times: outside the fitted span"):
+        tr.at(t1 + 1.0)
+    # Explicit opt-in returns the mirror image: X(t1 + d) == X(t1 - d).
+    d = 0.3
+    np.testing.assert_allclose(tr.at(t1 + d, extrapolate=True), tr.at(t1 - d), atol=1e-9)
+
+
+def test_gaze_predict_outside_the_fit_raises():
+    frames = gaze_frames(10)
+    field = sc.GazeField.fit(frames, n_charges=1, kappa=30.0)
+    assert np.isfinite(field.predict([[1.0, 1.0, 1.6]], t=9.4)).all()  # within half a frame
+    with pytest.raises(ValueError, match=r"^t: 25.0 s is outside the fitted frames"):
+        field.predict([[1.0, 1.0, 1.6]], t=25.0)
+    with pytest.raises(ValueError, match=r"^t: -3.0 s is outside"):
+        field.predict([[1.0, 1.0, 1.6]], t=-3.0)
+
+
+def test_too_many_charges_for_the_gaze_raises():
+    frames = [gaze_frames(1, n_people=6)[0]]
+    with pytest.raises(ValueError, match=r"^n_charges: 50 charges .* only 6 people"):
+        sc.GazeField.fit(frames, n_charges=50)
+
+
+def test_coinciding_charges_warn_and_are_not_converged():
+    # 6 charges for 6 people who all look at one point: the EM converges (64 iterations
+    # measured) with the charges collapsed onto that point; it used to say "converged".
+    frames = [gaze_frames(1, n_people=6)[0]]
+    with pytest.warns(RuntimeWarning, match=r"n_charges: charges \d and \d .* coincide"):
+        field = sc.GazeField.fit(frames, n_charges=6, kappa=400.0, init="pairs")
+    assert field.iterations[0] < 200
+    assert not field.converged.any()
+
+
+def test_floats_are_not_truncated_to_ints():
+    cams = ring(12)
+    with pytest.raises(ValueError, match=r"^k: expected an integer, got 2.9"):
+        sc.dct_basis(cams.times, 2.9)  # type: ignore[arg-type]
+    with pytest.raises(ValueError, match=r"^k: expected an integer"):
+        sc.reconstruct_trajectory(np.zeros((12, 2)), cams, k=2.9)
+    frames = gaze_frames(3)
+    with pytest.raises(ValueError, match=r"^leave_out: expected an integer"):
+        sc.cross_validate_gaze(frames, leave_out=1.7, n_charges=1)  # type: ignore[arg-type]
+    with pytest.raises(ValueError, match=r"^n_charges: expected an integer"):
+        sc.GazeField.fit(frames, n_charges=1.5)  # type: ignore[arg-type]
+    with pytest.raises(ValueError, match=r"^eligible: expected integers"):
+        sc.cross_validate_gaze(frames, eligible=[0, 1.5], n_charges=1)
+
+
+def test_uint64_ids_do_not_wrap():
+    p, v = gaze_frames(1)[0]
+    ids = np.arange(6, dtype=np.uint64)
+    ids[0] = 2**63 + 5
+    with pytest.raises(ValueError, match=r"^frames\[0\].ids: person ids must fit in int64"):
+        sc.GazeField.fit([(p, v, None, ids)], n_charges=1)
+    ok = np.arange(6, dtype=np.uint64) + 10
+    field = sc.GazeField.fit([(p, v, None, ok)], n_charges=1, kappa=20.0)
+    assert field.people.tolist() == list(range(10, 16))
+
+
+# ----------------------------------------------------------------------------- files
+
+
+@pytest.mark.parametrize("mask", [0o022, 0o002, 0o077])
+def test_written_files_respect_the_umask(tmp_path, mask):
+    old = os.umask(mask)
+    try:
+        path = io.write_json(tmp_path / "sub" / "report.json", {"a": np.arange(3)})
+        mode = stat.S_IMODE(path.stat().st_mode)
+    finally:
+        os.umask(old)
+    assert mode == 0o666 & ~mask
+    assert not list(path.parent.glob(".*.tmp"))  # no temp file left behind
