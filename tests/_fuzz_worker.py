@@ -138,6 +138,9 @@ BASE: dict[str, tuple[list[Any], dict[str, Any]]] = {
     "align_similarity": ([X, 2 * X + 1], {}),
     "ray_sphere": ([C[:3], -C[:3], np.zeros((3, 3)), np.ones(3)], {}),
     "perspective_distance": ([P_EYE, V_EYE, np.tile(TARGET, (8, 1))], {}),
+    # The ring's optical axes meet at the origin: a valid fixation segment.
+    "calibrate_gaze": ([R, C, 1e-4, 100.0, 50, 1e-12], {}),
+    "gaze_rays": ([R, C, np.zeros(3), np.array([0.0, 0.0, 1.0])], {}),
     "reconstruct_trajectories": (
         [K, R, C, TIMES, PIX_TRAJ, Opts(TRAJ_OPTS)],
         {"keep_covariance": True, "strict": False},
