@@ -23,6 +23,7 @@ from socialcam.articulated import (
 from socialcam.camera import Cameras
 from socialcam.charges import (
     Charge,
+    ChargeOptions,
     ChargeTrack,
     GazeRays,
     find_charges,
@@ -65,6 +66,7 @@ __all__ = [
     "BqpResult",
     "Cameras",
     "Charge",
+    "ChargeOptions",
     "ChargeTrack",
     "ConvergenceError",
     "DegenerateError",
