@@ -141,7 +141,8 @@ def track_charges(
     min_length: int = 10,
 ) -> tuple[npt.NDArray[np.int64], _F64]:
     """Mean-shift tracking of membership features ``(n,J)`` → track ids ``(n,)`` (−1 =
-    dropped duplicate) and centres ``(K,J)`` (Sec 6.1.3)."""
+    dropped: a duplicate in its frame, or in a run shorter than ``min_length`` frames, runs
+    being split by gaps of more than ``max_gap`` frames) and centres ``(K,J)`` (Sec 6.1.3)."""
 
 # ---- issue 6: gaze field (thesis Chapter 7). Rays flat: p (N,3), v (N,3), members (N,)
 # dense int64 in 0..J, offsets (F+1,) int64; windows (W,3) int64 [start, end, n_charges];

@@ -51,7 +51,8 @@ class GazeRays:
     p : (N, 3) eye centres, metres
     v : (N, 3) unit gaze directions (an error if not unit, unless ``normalize=True``)
     h : float or (N,) bandwidths > 0: std of eye-in-head deviation on the plane at unit
-        distance from the eye (radians, roughly)
+        distance from the eye (dimensionless, metres per metre of depth; equal to the
+        angle in radians for small angles, never degrees)
     ids : (N,) integer person ids (default ``0..N-1``); used to follow people across frames
     normalize : scale ``v`` to unit length instead of refusing it
     """
@@ -59,7 +60,7 @@ class GazeRays:
     p: FloatArray
     v: FloatArray
     h: FloatArray
-    ids: IntArray = field(default=None)  # type: ignore[assignment]
+    ids: IntArray = field(default=None)  # type: ignore[assignment, arg-type]
     normalize: InitVar[bool] = False
 
     def __post_init__(self, normalize: bool) -> None:
