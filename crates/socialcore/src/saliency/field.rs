@@ -136,7 +136,7 @@ impl Grid {
                 "shape",
                 format!(
                     "{shape:?} asks for more than {MAX_GRID_CELLS} samples ({} GiB of float64)",
-                    MAX_GRID_CELLS * 8 >> 30
+                    (MAX_GRID_CELLS * 8) >> 30
                 ),
             ));
         }

@@ -739,7 +739,7 @@ fn cover_state(q: &[Vec<f64>], alive: &[bool], opts: &ModeOptions) -> CoverState
         let mut best: Option<(usize, f64)> = None;
         for (c, qc) in q.iter().enumerate() {
             // Ties go to the earlier (stronger) candidate.
-            if alive[c] && qc[i] <= m2 && best.is_none_or(|(_, b)| qc[i] < b) {
+            if alive[c] && qc[i] <= m2 && best.map_or(true, |(_, b)| qc[i] < b) {
                 best = Some((c, qc[i]));
             }
         }
@@ -786,7 +786,7 @@ fn cover(rays: &GazeRays, candidates: Vec<Charge>, opts: &ModeOptions) -> Result
             let st = cover_state(&q, &alive, opts);
             alive[c] = true;
             // Strictly better only, so ties keep the earlier (stronger) removal choice.
-            if best.as_ref().is_none_or(|(_, b)| st.score > b.score) {
+            if best.as_ref().map_or(true, |(_, b)| st.score > b.score) {
                 best = Some((c, st));
             }
         }

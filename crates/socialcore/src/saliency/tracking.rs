@@ -259,7 +259,7 @@ fn drop_short_runs(
     for (k, &t) in track.iter().enumerate() {
         if let Ok(t) = usize::try_from(t) {
             let key = (frames[k], k);
-            if first[t].is_none_or(|f| key < f) {
+            if first[t].map_or(true, |f| key < f) {
                 first[t] = Some(key);
             }
         }
