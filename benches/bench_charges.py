@@ -220,7 +220,7 @@ def main() -> None:
     pos_newton = [[c.position for c in cs] for cs in ours_newton]
     print(f"  socialcam (plain Eq 6.7, incl. regions + objects): {t_ours:8.2f} s")
     print(f"  socialcam (Newton-accelerated):                   {t_newton:8.2f} s")
-    print(f"  socialcam defaults (Newton, pair seeds, cover):   {t_default:8.2f} s")
+    print(f"  socialcam defaults (Newton, pair seeds, strongest):{t_default:8.2f} s")
     print(f"  numpy (plain Eq 6.7), mean-shift only:           {t_ref_ms:8.2f} s")
     print(f"  numpy total (seeds + mean-shift + merge/filter): {t_ref:8.2f} s")
     print(f"  frames agreeing (same count, within 1 cm): plain {agree(pos_ours, ref):.4f}, "
