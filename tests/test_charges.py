@@ -3,6 +3,11 @@ against closed forms and against simulated scenes with known joint attention."""
 
 from __future__ import annotations
 
+import dataclasses
+import signal
+import threading
+import time
+
 import numpy as np
 import pytest
 
@@ -57,10 +62,112 @@ def test_gaze_rays_validation():
         sc.GazeRays(p, v, 0.1, ids=[3, 3])
     with pytest.raises(ValueError, match="points"):
         sc.saliency_field(r, [[np.nan, 0, 0]])
-    with pytest.raises(ValueError, match="depth_max"):
+    with pytest.raises(ValueError, match="depth_range"):
         sc.find_charges(r, depth_range=(2.0, 1.0))
     with pytest.raises(ValueError, match="seed"):
         sc.find_charges(r, seed=-1)
+
+
+def test_charge_options_are_one_frozen_validated_dataclass():
+    o = sc.ChargeOptions()
+    with pytest.raises(dataclasses.FrozenInstanceError):
+        o.tol = 1.0  # type: ignore[misc]
+    assert o.membership == "strongest" and o.max_iter == 100 and o.pair_seeds
+    for bad, name in [
+        ({"seeds_per_ray": 2.9}, "seeds_per_ray"),
+        ({"seeds_per_ray": 0}, "seeds_per_ray"),
+        ({"max_iter": -1}, "max_iter"),
+        ({"max_iter": True}, "max_iter"),
+        ({"min_members": 1.5}, "min_members"),
+        ({"tol": 0.0}, "tol"),
+        ({"member_sigma": float("nan")}, "member_sigma"),
+        ({"membership": "exclusive"}, "membership"),
+        ({"charge_penalty": -1.0}, "charge_penalty"),
+        ({"region_level": 1.0}, "region_level"),
+        ({"depth_range": (0.0, 5.0)}, "depth_range"),
+        ({"bounds": ((0, 0, 0), (1, -1, 1))}, "bounds"),
+        ({"newton": "yes"}, "newton"),
+    ]:
+        with pytest.raises(ValueError, match=f"^{name}:"):
+            sc.ChargeOptions(**bad)
+    rays = _rays_at([0, 0, 1.0], _circle(3, 2.0, [0, 0], 1.5))
+    # The same options through `options=` and through overrides give the same answer.
+    a = sc.find_charges(rays, options=sc.ChargeOptions(membership="all", seeds_per_ray=5))
+    b = sc.find_charges(rays, membership="all", seeds_per_ray=5)
+    assert [c.position.tolist() for c in a] == [c.position.tolist() for c in b]
+    with pytest.raises(ValueError, match=r"^max_iterations: not an option"):
+        sc.find_charges(rays, max_iterations=5)
+    with pytest.raises(ValueError, match=r"^options:"):
+        sc.find_charges(rays, options={"tol": 1e-3})  # type: ignore[arg-type]
+    with pytest.raises(TypeError):
+        sc.find_charges(rays, 0, sc.ChargeOptions())  # type: ignore[misc]  # keyword-only
+    assert sc.ChargeOptions(bounds=([0, 0, 0], [1, 1, 1])).to_dict()["bounds"] == (
+        (0.0, 0.0, 0.0),
+        (1.0, 1.0, 1.0),
+    )
+
+
+def test_sizes_that_do_not_fit_in_memory_are_refused():
+    rays = _rays_at([0, 0, 1.0], _circle(3, 2.0, [0, 0], 1.5))
+    with pytest.raises(ValueError, match=r"^shape:"):
+        sc.saliency_grid(rays, (0, 0, 0), (1, 1, 1), shape=100000)
+    with pytest.raises(ValueError, match=r"^shape:"):
+        sc.saliency_grid(rays, (0, 0, 0), (1, 1, 1), shape=(10, -1, 10))
+    with pytest.raises(ValueError, match=r"^shape:"):
+        sc.saliency_grid(rays, (0, 0, 0), (1, 1, 1), shape=2.5)  # type: ignore[arg-type]
+    with pytest.raises(ValueError, match=r"^seeds_per_ray:"):
+        sc.find_charges(rays, seeds_per_ray=10**12)
+    with pytest.raises(ValueError, match=r"^seeds_per_ray:"):
+        sc.find_charges(rays, seeds_per_ray=10**30)
+    with pytest.raises(ValueError, match=r"^max_gap:"):
+        sc.track_charges([], max_gap=-1)
+    with pytest.raises(ValueError, match=r"^min_length:"):
+        sc.track_charges([], min_length=0)
+
+
+def test_results_are_read_only():
+    rays = _rays_at([0, 0, 1.0], _circle(4, 2.0, [0, 0], 1.5))
+    (c,) = sc.find_charges(rays)
+    for name in ("position", "members", "member_index", "membership", "region_radii"):
+        with pytest.raises(ValueError, match="read-only"):
+            getattr(c, name)[0] = 0
+    (tr,) = sc.track_charges([[c]] * 12)
+    with pytest.raises(ValueError, match="read-only"):
+        tr.positions[0, 0] = 0.0
+
+
+def _interrupt_soon(delay: float) -> threading.Timer:
+    timer = threading.Timer(
+        delay, lambda: signal.pthread_kill(threading.main_thread().ident, signal.SIGINT)
+    )
+    timer.start()
+    return timer
+
+
+@pytest.mark.parametrize("what", ["charges", "grid"])
+def test_ctrl_c_stops_long_calls(what):
+    """A call that takes many seconds stops within a fraction of a second of Ctrl-C."""
+    scene = synth.meeting(200, seed=1)
+    frames = scene.ray_frames()
+    timer = _interrupt_soon(0.2)
+    t0 = time.perf_counter()
+    try:
+        with pytest.raises(KeyboardInterrupt):
+            if what == "charges":
+                # About 60 s of climbs on this machine.
+                sc.find_charges_sequence(frames, seeds_per_ray=2000)
+            else:
+                # 8.4e6 samples (67 MB) of 300 rays: seconds even in a release build.
+                rng = np.random.default_rng(0)
+                many = sc.GazeRays(
+                    rng.uniform(0, 8, (300, 3)), rng.normal(size=(300, 3)), 0.1, normalize=True
+                )
+                sc.saliency_grid(many, (0, 0, 0), (8, 8, 3), shape=(256, 256, 128))
+    finally:
+        timer.cancel()
+    assert time.perf_counter() - t0 < 5.0
+    # The interrupt is cleared: the next call works.
+    assert len(sc.find_charges(frames[0], seeds_per_ray=2)) >= 0
 
 
 # ---------------------------------------------------------------- field
@@ -82,7 +189,7 @@ def test_field_matches_equations_and_grid(rng):
     assert np.allclose(got, want, rtol=1e-10, atol=1e-20 / h.min())
     assert got.max() > 0.1
     lo, hi, shape = (-3, -2, -1), (3, 2, 1.5), (9, 7, 5)
-    g = sc.saliency_grid(r, lo, hi, shape)
+    g = sc.saliency_grid(r, lo, hi, shape=shape)
     xs, ys, zs = grid_axes(lo, hi, shape)
     pts = np.stack(np.meshgrid(xs, ys, zs, indexing="ij"), -1).reshape(-1, 3)
     assert g.shape == shape
@@ -148,29 +255,113 @@ def test_same_seed_same_answer_and_sequence_matches_frames():
 # ---------------------------------------------------------------- scenes: accuracy
 
 
-def test_mocap_replica_accuracy():
-    """Sec 6.2.1 replica: 6 people, 2 static markers, eye-in-head noise 0.015 (0.86°),
-    bandwidth 0.05. The thesis reports 10.1 ± 5.73 cm and markers always inside the 80 %
-    region."""
-    scene = synth.mocap_replica(200, h=0.05, noise=0.015, seed=1)
-    charges = sc.find_charges_sequence(scene.ray_frames(), seed=0, bounds=tuple(scene.room))
-    errors, inside, inside_field = [], [], []
+def _replica_matches(scene, charges):
+    """Per (frame, marker): the charge sharing most members with the true group (None if
+    no charge shares 2), its marker, and the oracle intersection of the group's rays."""
+    orc = scene.oracle_intersections()
+    out = []
     for f, cs in enumerate(charges):
         for m in range(2):
             members = set(scene.members(f, m).tolist())
             match = [c for c in cs if len(members & set(c.members.tolist())) >= 2]
-            assert match, f"frame {f}: marker {m} has no charge"
-            c = max(match, key=lambda c: len(members & set(c.members.tolist())))
-            marker = scene.targets[f, m]
-            errors.append(np.linalg.norm(c.position - marker))
-            inside.append(c.in_region(marker))
-            inside_field.append(sc.saliency_field(scene.rays(f), marker) >= 0.8 * c.magnitude)
-    e = np.array(errors)
-    print(f"mocap replica: error {100 * e.mean():.1f} ± {100 * e.std():.1f} cm, ")
-    print(f"inside ellipsoid {np.mean(inside):.3f}, inside 80% field {np.mean(inside_field):.3f}")
-    assert e.mean() < 0.101 and e.std() < 0.12
-    assert np.mean(inside) >= 0.95 and np.mean(inside_field) >= 0.95
-    assert np.mean([len(cs) == 2 for cs in charges]) >= 0.95
+            c = max(match, key=lambda c: len(members & set(c.members.tolist())), default=None)
+            out.append((f, c, scene.targets[f, m], orc[f, m]))
+    return out
+
+
+@pytest.mark.parametrize("seed", [1, 2, 3])
+def test_mocap_replica_accuracy(seed):
+    """Sec 6.2.1 replica: 6 people, 2 static markers, eye-in-head noise 0.015 (0.86°),
+    bandwidth 0.05. Thresholds are what we measure (seeds 1–3, 200 frames each), with
+    margins: mean error 7.4 / 7.4 / 8.2 cm (the thesis reports 10.1 cm on real data), the
+    oracle least-squares intersection of the true groups 8.8 / 7.7 / 8.5 cm; mean error
+    vector within 2.1 standard errors of zero on every axis (|bias| ≤ 0.7 cm); every
+    charge a strict local maximum of the field at 5 mm (largest relative gain of a
+    neighbour −2.6e-5; mean-shift stopped at 5 cm tolerance gives +1.4e-3)."""
+    scene = synth.mocap_replica(200, h=0.05, noise=0.015, seed=seed)
+    charges = sc.find_charges_sequence(scene.ray_frames(), seed=0, bounds=tuple(scene.room))
+    # Right number of charges in every frame (measured: all 200 frames, all seeds).
+    assert all(len(cs) == 2 for cs in charges)
+    matches = _replica_matches(scene, charges)
+    assert all(c is not None for _, c, _, _ in matches)
+    pos = np.array([c.position for _, c, _, _ in matches])
+    marker = np.array([t for _, _, t, _ in matches])
+    oracle = np.array([o for _, _, _, o in matches])
+    err = np.linalg.norm(pos - marker, axis=1)
+    oerr = np.linalg.norm(oracle - marker, axis=1)
+    print(f"replica seed {seed}: error {100 * err.mean():.2f} ± {100 * err.std():.2f} cm, "
+          f"oracle {100 * oerr.mean():.2f} cm, max {100 * err.max():.1f} cm")  # fmt: skip
+    # Mean: no worse than the oracle by more than 5 % (measured ratio 0.84–0.96).
+    assert err.mean() <= 1.05 * oerr.mean()
+    # Per point: every charge within 50 cm of its marker (measured max 47 cm), and 95 %
+    # within 3× the oracle's own 95th-percentile error.
+    assert err.max() < 0.5
+    assert np.mean(err <= 3 * np.quantile(oerr, 0.95)) >= 0.95
+    # Unbiased: the mean error vector is within 4 standard errors of 0 on each axis (a
+    # +4 cm bias is more than 10 standard errors).
+    d = pos - marker
+    se = d.std(axis=0) / np.sqrt(len(d))
+    assert (np.abs(d.mean(axis=0)) <= 4 * se).all(), (d.mean(axis=0), se)
+    # Converged: each charge is a local maximum of the field (to 1e-6 of its magnitude).
+    for f, c, _, _ in matches:
+        nb = c.position + np.vstack([np.eye(3), -np.eye(3)]) * 0.005
+        gain = sc.saliency_field(scene.rays(f), nb).max() - c.magnitude
+        assert gain <= 1e-6 * c.magnitude, (f, gain / c.magnitude)
+    # The marker lies in the 80 % confidence region in ≥ 95 % of cases (measured 1.0).
+    inside = [c.in_region(t) for _, c, t, _ in matches]
+    assert np.mean(inside) >= 0.95
+
+
+def _heldout_scores(scene, charges):
+    """Fraction of frames with the right number of charges, and mean errors of the charges
+    (nearest charge to each attended marker; the room diagonal if the frame has none) and
+    of the oracle intersection of the true groups."""
+    truth = scene.n_charges()
+    right = np.mean([len(cs) == t for cs, t in zip(charges, truth, strict=True)])
+    orc = scene.oracle_intersections()
+    diag = float(np.linalg.norm(scene.room[1] - scene.room[0]))
+    err, oerr = [], []
+    for f, cs in enumerate(charges):
+        pos = np.array([c.position for c in cs]).reshape(-1, 3)
+        for t in range(scene.targets.shape[1]):
+            if np.isnan(orc[f, t, 0]):
+                continue
+            oerr.append(np.linalg.norm(orc[f, t] - scene.targets[f, t]))
+            err.append(
+                np.linalg.norm(pos - scene.targets[f, t], axis=1).min() if len(pos) else diag
+            )
+    return float(right), float(np.mean(err)), float(np.mean(oerr))
+
+
+def test_heldout_marker_scenes_beat_the_thesis_rule():
+    """Held-out marker-check scenes (synth.marker_check_family seeds 100–109 were never
+    used for tuning; 0–7 were). Measured, seeds 100–109 (100 frames each): right count
+    0.36–1.00 (mean 0.81) with the default rule, mean error / oracle 1.07–2.31 (mean
+    1.48). The thesis' rule (membership="all") over-counts: right count mean 0.2 or less.
+    These are regression guards at the measured level, not the issue's target (≥ 95 %
+    and ≤ 1.25×), which the strict xfail below tracks."""
+    for seed in (104, 105, 108):
+        scene = synth.marker_check_family(seed, n_frames=60)
+        frames = scene.ray_frames()
+        right, err, oerr = _heldout_scores(scene, sc.find_charges_sequence(frames))
+        right_all, _, _ = _heldout_scores(scene, sc.find_charges_sequence(frames, membership="all"))
+        print(f"held-out {seed}: right {right:.2f} (thesis rule {right_all:.2f}), "
+              f"error/oracle {err / oerr:.2f}")  # fmt: skip
+        # Measured at 60 frames: right 0.83 / 0.97 / 0.98 (thesis rule 0.00 / 0.25 / 0.15),
+        # error / oracle 1.30 / 1.13 / 0.98.
+        assert right >= 0.75 and right >= right_all + 0.5
+        assert err <= 1.45 * oerr
+
+
+@pytest.mark.xfail(
+    strict=True,
+    reason="issue 13 target (right count ≥ 95 %, error ≤ 1.25× oracle) not reached on "
+    "wide-bandwidth scenes with groups of 2: seed 101 (h = 0.075) measures 0.37 and 2.3×",
+)
+def test_heldout_marker_scenes_reach_the_issue_target():
+    scene = synth.marker_check_family(101, n_frames=60)
+    right, err, oerr = _heldout_scores(scene, sc.find_charges_sequence(scene.ray_frames()))
+    assert right >= 0.95 and err <= 1.25 * oerr
 
 
 @pytest.mark.parametrize("name", ["meeting", "party"])
@@ -207,6 +398,30 @@ def test_scene_charge_counts_and_tracks(name):
         print(f"{name}: target {t} group {m} track {tr[0].id} covers {covered:.3f}")
         assert covered >= 0.9
     assert checked == (3 if name == "meeting" else 5)
+
+
+def test_meeting_demo_gives_its_real_groups_as_tracks():
+    """The meeting demo (seed 0, 300 frames): 3 real groups (A, B, everyone). Measured:
+    3 tracks of 192, 199 and 91 frames with the defaults; 23 tracks, 20 of them 1–5
+    frames long (transitions), without the run rules (min_length=1, max_gap=0)."""
+    scene = synth.meeting(seed=0)
+    charges = sc.find_charges_sequence(scene.ray_frames(), seed=0)
+    tracks = sc.track_charges(charges)
+    assert [t.core_members.tolist() for t in tracks] == [
+        list(range(6)),
+        list(range(6, 11)),
+        list(range(11)),
+    ]
+    assert [t.id for t in tracks] == [0, 1, 2]
+    assert all(len(t) >= 80 for t in tracks)
+    raw = sc.track_charges(charges, min_length=1, max_gap=0)
+    assert len(raw) > 10 and sum(len(t) < 10 for t in raw) >= 10
+    # A gap longer than max_gap splits a run: A (192 frames in all) is two runs of about
+    # 100 frames (before and after the presenter), so min_length=120 drops every track,
+    # while bridging the gap (max_gap=150) keeps A and B whole.
+    assert sc.track_charges(charges, min_length=120) == []
+    bridged = sc.track_charges(charges, min_length=120, max_gap=150)
+    assert [t.core_members.tolist() for t in bridged] == [list(range(6)), list(range(6, 11))]
 
 
 def test_tracks_survive_dissolution_and_reemergence():

@@ -24,6 +24,7 @@ from socialcam.articulated import (
 from socialcam.camera import Cameras
 from socialcam.charges import (
     Charge,
+    ChargeOptions,
     ChargeTrack,
     GazeRays,
     find_charges,
@@ -69,6 +70,7 @@ __all__ = [
     "BqpResult",
     "Cameras",
     "Charge",
+    "ChargeOptions",
     "ChargeTrack",
     "ConvergenceError",
     "DegenerateError",

@@ -13,6 +13,7 @@ from typing import Any, TypeAlias
 import numpy as np
 import numpy.typing as npt
 
+from socialcam.charges import ChargeOptions
 from socialcam.gazefield import GazeFieldOptions
 from socialcam.trajectory import TrajectoryOptions
 
@@ -112,20 +113,7 @@ def find_charges(
     h: _F64,
     offsets: npt.NDArray[np.int64],
     seed: int,
-    seeds_per_ray: int = 20,
-    depth_min: float = 0.3,
-    depth_max: float = 10.0,
-    tol: float = 1e-5,
-    newton: bool = True,
-    max_iter: int = 100,
-    merge_radius: float = 0.2,
-    member_sigma: float = 2.5,
-    min_members: int = 2,
-    exclusive: bool = True,
-    min_magnitude: float = 0.0,
-    bounds: tuple[tuple[float, float, float], tuple[float, float, float]] | None = None,
-    region_level: float = 0.8,
-    region_max_radius: float = 10.0,
+    options: ChargeOptions,
 ) -> tuple[
     npt.NDArray[np.int64],
     _F64,
@@ -149,9 +137,12 @@ def track_charges(
     bandwidth: float = 0.3,
     max_iter: int = 300,
     bin_seeding: bool = True,
+    max_gap: int = 5,
+    min_length: int = 10,
 ) -> tuple[npt.NDArray[np.int64], _F64]:
     """Mean-shift tracking of membership features ``(n,J)`` → track ids ``(n,)`` (−1 =
-    dropped duplicate) and centres ``(K,J)`` (Sec 6.1.3)."""
+    dropped: a duplicate in its frame, or in a run shorter than ``min_length`` frames, runs
+    being split by gaps of more than ``max_gap`` frames) and centres ``(K,J)`` (Sec 6.1.3)."""
 
 # ---- issue 6: gaze field (thesis Chapter 7). Rays flat: p (N,3), v (N,3), members (N,)
 # dense int64 in 0..J, offsets (F+1,) int64; windows (W,3) int64 [start, end, n_charges];

@@ -13,6 +13,7 @@ depend on the thread count.
 
 from __future__ import annotations
 
+import dataclasses
 from collections.abc import Sequence
 from dataclasses import InitVar, dataclass, field
 from typing import TYPE_CHECKING, Any
@@ -21,7 +22,15 @@ import numpy as np
 import numpy.typing as npt
 
 from socialcam import _core
-from socialcam._validate import FloatArray, as_float_array, check_seed, readonly
+from socialcam._validate import (
+    FloatArray,
+    as_float_array,
+    check_choice,
+    check_float,
+    check_int,
+    check_seed,
+    readonly,
+)
 
 if TYPE_CHECKING:
     from matplotlib.axes import Axes
@@ -42,7 +51,8 @@ class GazeRays:
     p : (N, 3) eye centres, metres
     v : (N, 3) unit gaze directions (an error if not unit, unless ``normalize=True``)
     h : float or (N,) bandwidths > 0: std of eye-in-head deviation on the plane at unit
-        distance from the eye (radians, roughly)
+        distance from the eye (dimensionless, metres per metre of depth; equal to the
+        angle in radians for small angles, never degrees)
     ids : (N,) integer person ids (default ``0..N-1``); used to follow people across frames
     normalize : scale ``v`` to unit length instead of refusing it
     """
@@ -50,7 +60,7 @@ class GazeRays:
     p: FloatArray
     v: FloatArray
     h: FloatArray
-    ids: IntArray = field(default=None)  # type: ignore[assignment]
+    ids: IntArray = field(default=None)  # type: ignore[assignment, arg-type]
     normalize: InitVar[bool] = False
 
     def __post_init__(self, normalize: bool) -> None:
@@ -127,10 +137,32 @@ def saliency_field(rays: GazeRays, points: npt.ArrayLike) -> FloatArray:
     return out[0] if single else out  # type: ignore[no-any-return]
 
 
+#: The most samples :func:`saliency_grid` computes (2 GiB of float64; the core's limit).
+MAX_GRID_CELLS = 1 << 28
+
+
+def _grid_shape(shape: int | Sequence[int]) -> tuple[int, int, int]:
+    """``shape`` as 3 positive sizes whose product fits in :data:`MAX_GRID_CELLS`."""
+    if isinstance(shape, (int, np.integer)) and not isinstance(shape, bool):
+        sizes: list[object] = [shape] * 3
+    elif isinstance(shape, (tuple, list, np.ndarray)) and len(shape) == 3:
+        sizes = list(shape)
+    else:
+        raise ValueError(f"shape: expected an integer or 3 integers, got {shape!r}")
+    sh = tuple(check_int(n, "shape", min=1) for n in sizes)
+    if sh[0] * sh[1] * sh[2] > MAX_GRID_CELLS:
+        raise ValueError(
+            f"shape: {sh} is {sh[0] * sh[1] * sh[2]:.3g} samples, more than {MAX_GRID_CELLS} "
+            f"({MAX_GRID_CELLS * 8 >> 30} GiB of float64)"
+        )
+    return sh  # type: ignore[return-value]
+
+
 def saliency_grid(
     rays: GazeRays,
     lo: npt.ArrayLike,
     hi: npt.ArrayLike,
+    *,
     shape: int | Sequence[int] = 64,
 ) -> FloatArray:
     """The field sampled on a regular grid, in parallel.
@@ -151,9 +183,7 @@ def saliency_grid(
     r = _rays(rays)
     lo_a = as_float_array(lo, "lo", (3,))
     hi_a = as_float_array(hi, "hi", (3,))
-    sh = (int(shape),) * 3 if np.isscalar(shape) else tuple(int(s) for s in shape)  # type: ignore[arg-type]
-    if len(sh) != 3 or min(sh) < 1:
-        raise ValueError(f"shape: expected 3 positive sizes, got {shape!r}")
+    sh = _grid_shape(shape)
     return _core.saliency_grid(  # type: ignore[no-any-return]
         r.p, r.v, r.h, tuple(lo_a.tolist()), tuple(hi_a.tolist()), sh
     )
@@ -165,7 +195,7 @@ def grid_axes(
     """The sample coordinates of :func:`saliency_grid` along x, y and z."""
     lo_a = as_float_array(lo, "lo", (3,))
     hi_a = as_float_array(hi, "hi", (3,))
-    sh = (int(shape),) * 3 if np.isscalar(shape) else tuple(int(s) for s in shape)  # type: ignore[arg-type]
+    sh = _grid_shape(shape)
     xs, ys, zs = (np.linspace(lo_a[a], hi_a[a], sh[a]) for a in range(3))
     return xs, ys, zs
 
@@ -216,54 +246,127 @@ class Charge:
         return out
 
 
-def _mode_kwargs(
-    seeds_per_ray: int,
-    depth_range: tuple[float, float],
-    tol: float,
-    newton: bool,
-    max_iter: int,
-    merge_radius: float,
-    member_sigma: float,
-    min_members: int,
-    exclusive: bool,
-    min_magnitude: float,
-    bounds: tuple[npt.ArrayLike, npt.ArrayLike] | None,
-    region_level: float,
-    region_max_radius: float,
-) -> dict[str, Any]:
-    if len(depth_range) != 2:
-        raise ValueError(f"depth_range: expected (min, max), got {depth_range!r}")
-    for name, val in (
-        ("seeds_per_ray", seeds_per_ray),
-        ("max_iter", max_iter),
-        ("min_members", min_members),
-    ):
-        if isinstance(val, bool) or not isinstance(val, (int, np.integer)) or val < 1:
-            raise ValueError(f"{name}: expected a positive integer, got {val!r}")
-    bnd = None
-    if bounds is not None:
-        blo = as_float_array(bounds[0], "bounds[0]", (3,))
-        bhi = as_float_array(bounds[1], "bounds[1]", (3,))
-        bnd = (tuple(blo.tolist()), tuple(bhi.tolist()))
-    return dict(
-        seeds_per_ray=int(seeds_per_ray),
-        depth_min=float(depth_range[0]),
-        depth_max=float(depth_range[1]),
-        tol=float(tol),
-        newton=bool(newton),
-        max_iter=int(max_iter),
-        merge_radius=float(merge_radius),
-        member_sigma=float(member_sigma),
-        min_members=int(min_members),
-        exclusive=bool(exclusive),
-        min_magnitude=float(min_magnitude),
-        bounds=bnd,
-        region_level=float(region_level),
-        region_max_radius=float(region_max_radius),
-    )
+MEMBERSHIP_RULES = ("cover", "strongest", "all")
 
 
-def _run(frames: Sequence[GazeRays], seed: int, kw: dict[str, Any]) -> list[list[Charge]]:
+@dataclass(frozen=True)
+class ChargeOptions:
+    """Options of :func:`find_charges` and :func:`find_charges_sequence` (validated on
+    construction; the Rust binding reads the fields of the same object). Metres.
+
+    Attributes
+    ----------
+    seeds_per_ray : mean-shift seeds per ray, stratified in depth (Sec 6.2)
+    depth_range : ``(min, max)`` depth of those seeds, metres from the eye
+    pair_seeds : also seed at the near-intersection of every pair of rays passing within
+        ``member_sigma`` bandwidths of each other (narrow bandwidths make basins shorter
+        than the spacing of the stratified seeds)
+    tol : a climb has converged when a step moves less than ``tol`` metres
+    newton : Newton / over-relaxed steps where they raise the field (fast on elongated
+        modes); ``False`` runs the plain update of Eq 6.7
+    max_iter : iteration cap per climb; climbs that reach it are dropped
+    merge_radius : converged climbs closer than this (metres) are one mode
+    member_sigma : a ray can be a member of a charge within ``member_sigma`` bandwidths
+        (``‖d/h‖ ≤ member_sigma``, Eq 6.2)
+    min_members : fewest member rays of a charge (Sec 6.2: more than one ray)
+    membership : ``"strongest"`` (default) — winner-take-all: a ray counts only for the
+        strongest charge it is within ``member_sigma`` of, and ``min_members`` applies to
+        the rays still free (rejects crossings of different groups' rays behind their
+        targets); ``"all"`` — the thesis' rule (every mode with ``min_members`` rays
+        within ``member_sigma``; a ray may count for several); ``"cover"``
+        (experimental) — each ray belongs to the candidate it fits best and the set of
+        charges is the one that explains the rays best (score ``−½Σ‖d/h‖² −
+        ½ member_sigma² · #rays left out − charge_penalty · #charges``), each charge at
+        the mode of its members' own field
+    charge_penalty : ``"cover"`` only: the price of one more charge, in units of ``½‖d/h‖²``
+    min_magnitude : charges with a weaker field value are rejected
+    bounds : ``(lo, hi)`` (3,) corners of a box (a room) outside of which modes are rejected
+    region_level : the confidence region is where the field exceeds this fraction of the
+        charge's magnitude (Sec 6.2.1: 0.8)
+    region_max_radius : cap on the region's semi-axes, metres
+    """
+
+    seeds_per_ray: int = 20
+    depth_range: tuple[float, float] = (0.3, 10.0)
+    pair_seeds: bool = True
+    tol: float = 1e-5
+    newton: bool = True
+    max_iter: int = 100
+    merge_radius: float = 0.2
+    member_sigma: float = 2.5
+    min_members: int = 2
+    membership: str = "strongest"
+    charge_penalty: float = 2.0
+    min_magnitude: float = 0.0
+    bounds: tuple[tuple[float, float, float], tuple[float, float, float]] | None = None
+    region_level: float = 0.8
+    region_max_radius: float = 10.0
+
+    def __post_init__(self) -> None:
+        # Seeds alone for 10**12 per ray would be terabytes: the core refuses what does not
+        # fit in memory; the Python layer caps the integer so it converts to usize.
+        check_int(self.seeds_per_ray, "seeds_per_ray", min=1)
+        dr = self.depth_range
+        if not isinstance(dr, (tuple, list)) or len(dr) != 2:
+            raise ValueError(f"depth_range: expected (min, max) in metres, got {dr!r}")
+        lo = check_float(dr[0], "depth_range", min=0.0, min_exclusive=True)
+        hi = check_float(dr[1], "depth_range", min=lo)
+        object.__setattr__(self, "depth_range", (lo, hi))
+        for name in ("pair_seeds", "newton"):
+            if not isinstance(getattr(self, name), (bool, np.bool_)):
+                raise ValueError(f"{name}: expected True or False, got {getattr(self, name)!r}")
+            object.__setattr__(self, name, bool(getattr(self, name)))
+        check_float(self.tol, "tol", min=0.0, min_exclusive=True)
+        check_int(self.max_iter, "max_iter", min=1)
+        check_float(self.merge_radius, "merge_radius", min=0.0)
+        check_float(self.member_sigma, "member_sigma", min=0.0, min_exclusive=True)
+        check_int(self.min_members, "min_members", min=1)
+        check_choice(self.membership, "membership", MEMBERSHIP_RULES)
+        check_float(self.charge_penalty, "charge_penalty", min=0.0)
+        check_float(self.min_magnitude, "min_magnitude")
+        if self.bounds is not None:
+            if not isinstance(self.bounds, (tuple, list)) or len(self.bounds) != 2:
+                raise ValueError(f"bounds: expected (lo, hi), got {self.bounds!r}")
+            blo = as_float_array(self.bounds[0], "bounds", (3,))
+            bhi = as_float_array(self.bounds[1], "bounds", (3,))
+            if (bhi < blo).any():
+                raise ValueError(f"bounds: hi {bhi.tolist()} is below lo {blo.tolist()}")
+            object.__setattr__(self, "bounds", (tuple(blo.tolist()), tuple(bhi.tolist())))
+        check_float(self.region_level, "region_level", min=0.0, min_exclusive=True, max=1.0)
+        if self.region_level >= 1.0:
+            raise ValueError(f"region_level: expected a number < 1, got {self.region_level}")
+        check_float(self.region_max_radius, "region_max_radius", min=0.0, min_exclusive=True)
+        for name in ("tol", "merge_radius", "member_sigma", "charge_penalty", "min_magnitude",
+                     "region_level", "region_max_radius"):  # fmt: skip
+            object.__setattr__(self, name, float(getattr(self, name)))
+        for name in ("seeds_per_ray", "max_iter", "min_members"):
+            object.__setattr__(self, name, int(getattr(self, name)))
+
+    def to_dict(self) -> dict[str, Any]:
+        return dataclasses.asdict(self)
+
+
+def _options(options: ChargeOptions | None, overrides: dict[str, Any]) -> ChargeOptions:
+    """``options`` (default: ``ChargeOptions()``) with ``overrides`` (field names) applied;
+    an unknown name raises ``ValueError`` naming it."""
+    if options is None:
+        base = ChargeOptions()
+    elif isinstance(options, ChargeOptions):
+        base = options
+    else:
+        raise ValueError(f"options: expected a ChargeOptions, got {type(options).__name__}")
+    if not overrides:
+        return base
+    names = {f.name for f in dataclasses.fields(ChargeOptions)}
+    unknown = sorted(set(overrides) - names)
+    if unknown:
+        raise ValueError(
+            f"{unknown[0]}: not an option of ChargeOptions (options: {', '.join(sorted(names))})"
+        )
+    return dataclasses.replace(base, **overrides)
+
+
+def _run(frames: Sequence[GazeRays], seed: int, options: ChargeOptions) -> list[list[Charge]]:
     if len(frames) == 0:
         return []
     p = np.concatenate([f.p for f in frames])
@@ -272,7 +375,7 @@ def _run(frames: Sequence[GazeRays], seed: int, kw: dict[str, Any]) -> list[list
     counts = np.array([len(f) for f in frames], dtype=np.int64)
     offsets = np.concatenate([[0], np.cumsum(counts)]).astype(np.int64)
     (frame, pos, mag, sup, mem, mem_off, membership, centre, axes, radii) = _core.find_charges(
-        p, v, h, offsets, check_seed(seed), **kw
+        p, v, h, offsets, check_seed(seed), options
     )
     # Ragged pieces, split with one numpy call each.
     mem_split = np.split(mem, mem_off[1:-1]) if len(frame) else []
@@ -304,34 +407,27 @@ def find_charges(
     rays: GazeRays,
     seed: int = 0,
     *,
-    seeds_per_ray: int = 20,
-    depth_range: tuple[float, float] = (0.3, 10.0),
-    tol: float = 1e-5,
-    newton: bool = True,
-    max_iter: int = 100,
-    merge_radius: float = 0.2,
-    member_sigma: float = 2.5,
-    min_members: int = 2,
-    exclusive: bool = True,
-    min_magnitude: float = 0.0,
-    bounds: tuple[npt.ArrayLike, npt.ArrayLike] | None = None,
-    region_level: float = 0.8,
-    region_max_radius: float = 10.0,
+    options: ChargeOptions | None = None,
+    **overrides: Any,
 ) -> list[Charge]:
     """The social charges of one frame (Sec 6.1.2).
 
     Seeds are drawn along every ray (``seeds_per_ray`` stratified depths in
-    ``depth_range`` metres, from ``seed``), each climbs the field with the update of
-    Eq 6.7 until it moves less than ``tol`` metres (seeds still drifting after
-    ``max_iter`` iterations are dropped; with ``newton`` (default) a Newton step on the
-    closed-form Hessian replaces the update wherever the Hessian is negative definite and
-    the step raises the field, which makes elongated modes converge fast), modes closer than ``merge_radius`` are merged in
-    seed order, and a mode is kept if at least ``min_members`` rays pass within
-    ``member_sigma`` bandwidths of it (Sec 6.2: "more than one gaze ray must contribute").
-    With ``exclusive`` (default) a ray counts for the strongest charge only
-    (winner-take-all), which rejects crossings of rays from different groups behind their
-    targets; ``exclusive=False`` is the thesis' plain rule. ``bounds=(lo, hi)`` rejects
-    modes outside a box (a room); ``min_magnitude`` weak modes.
+    ``depth_range`` metres, from ``seed``) and at the near-intersections of ray pairs
+    (``pair_seeds``); each climbs the field with the update of Eq 6.7 (accelerated by
+    Newton steps with ``newton``) until it moves less than ``tol`` metres; climbs still
+    moving after ``max_iter`` iterations are dropped; modes closer than ``merge_radius``
+    are merged in seed order. Which modes are charges, and which rays are their members,
+    is decided by ``membership`` (see :class:`ChargeOptions`; the default ``"strongest"``
+    gives each ray to the strongest charge it is near, ``"all"`` is the thesis' rule).
+    ``bounds=(lo, hi)`` rejects modes outside a box (a room); ``min_magnitude`` weak modes.
+
+    Parameters
+    ----------
+    rays : the frame's gaze rays
+    seed : seed of the random seed depths
+    options : a :class:`ChargeOptions` (default ``ChargeOptions()``)
+    **overrides : fields of :class:`ChargeOptions` to change, e.g. ``membership="all"``
 
     Returns
     -------
@@ -339,42 +435,25 @@ def find_charges(
     an empty list. Same ``seed``, same answer, whatever the number of threads.
     """
     r = _rays(rays)
-    kw = _mode_kwargs(
-        seeds_per_ray, depth_range, tol, newton, max_iter, merge_radius, member_sigma, min_members,
-        exclusive, min_magnitude, bounds, region_level, region_max_radius,
-    )  # fmt: skip
-    return _run([r], seed, kw)[0]
+    return _run([r], seed, _options(options, overrides))[0]
 
 
 def find_charges_sequence(
     frames: Sequence[GazeRays],
     seed: int = 0,
     *,
-    seeds_per_ray: int = 20,
-    depth_range: tuple[float, float] = (0.3, 10.0),
-    tol: float = 1e-5,
-    newton: bool = True,
-    max_iter: int = 100,
-    merge_radius: float = 0.2,
-    member_sigma: float = 2.5,
-    min_members: int = 2,
-    exclusive: bool = True,
-    min_magnitude: float = 0.0,
-    bounds: tuple[npt.ArrayLike, npt.ArrayLike] | None = None,
-    region_level: float = 0.8,
-    region_max_radius: float = 10.0,
+    options: ChargeOptions | None = None,
+    **overrides: Any,
 ) -> list[list[Charge]]:
     """:func:`find_charges` on every frame in one parallel core call.
 
     Frame ``t`` of the result equals ``find_charges(frames[t], seed, ...)``; each
-    :class:`Charge` has ``frame = t``.
+    :class:`Charge` has ``frame = t``. ``options`` and ``overrides`` as for
+    :func:`find_charges`.
     """
+    opts = _options(options, overrides)
     fr = [_rays(f) for f in frames]
-    kw = _mode_kwargs(
-        seeds_per_ray, depth_range, tol, newton, max_iter, merge_radius, member_sigma, min_members,
-        exclusive, min_magnitude, bounds, region_level, region_max_radius,
-    )  # fmt: skip
-    return _run(fr, seed, kw)
+    return _run(fr, seed, opts)
 
 
 @dataclass(frozen=True)
@@ -424,6 +503,8 @@ def track_charges(
     bandwidth: float = 0.3,
     max_iter: int = 300,
     bin_seeding: bool = True,
+    max_gap: int = 5,
+    min_length: int = 10,
 ) -> list[ChargeTrack]:
     """Links charges over frames by their membership features (Sec 6.1.3).
 
@@ -439,11 +520,24 @@ def track_charges(
     charges_per_frame : ``find_charges_sequence`` output; entry ``t`` is frame ``t``
     bandwidth : flat-kernel radius in feature space (unit vectors: two disjoint groups are
         √2 apart)
+    max_iter : iteration cap of each mean-shift climb
+    bin_seeding : one climb per occupied cell of a grid of spacing ``bandwidth``
+    max_gap : a track's charges at most ``max_gap`` missing frames apart form one run; a
+        longer gap (the group dissolved) starts a new run of the same track
+    min_length : runs with fewer charges are dropped: the short clusters that transitions
+        make while people switch targets one by one (default 10 frames, 1 s at 10 fps).
+        ``min_length=1`` keeps everything (the thesis' plain clustering)
 
     Returns
     -------
     list of :class:`ChargeTrack` sorted by id
     """
+    bw = check_float(bandwidth, "bandwidth", min=0.0, min_exclusive=True)
+    it = check_int(max_iter, "max_iter", min=1)
+    gap = check_int(max_gap, "max_gap", min=0)
+    length = check_int(min_length, "min_length", min=1)
+    if not isinstance(bin_seeding, (bool, np.bool_)):
+        raise ValueError(f"bin_seeding: expected True or False, got {bin_seeding!r}")
     flat = [(t, c) for t, cs in enumerate(charges_per_frame) for c in cs]
     if not flat:
         return []
@@ -455,9 +549,11 @@ def track_charges(
     track, centres = _core.track_charges(
         feats,
         frames,
-        bandwidth=float(bandwidth),
-        max_iter=int(max_iter),
+        bandwidth=bw,
+        max_iter=it,
         bin_seeding=bool(bin_seeding),
+        max_gap=gap,
+        min_length=length,
     )
     out: list[ChargeTrack] = []
     for tid in range(centres.shape[0]):
@@ -501,7 +597,7 @@ def plot_saliency(
     if axis not in (0, 1, 2):
         raise ValueError(f"axis: expected 0, 1 or 2, got {axis!r}")
     r = _rays(rays)
-    g = saliency_grid(r, lo, hi, shape)
+    g = saliency_grid(r, lo, hi, shape=shape)
     mip = g.max(axis=axis)
     keep = [a for a in range(3) if a != axis]
     axes_xyz = grid_axes(lo, hi, shape)
@@ -568,17 +664,25 @@ def plot_charge_tracks(
     *,
     times: npt.ArrayLike | None = None,
     truth: npt.ArrayLike | None = None,
+    legend_min_length: int = 10,
 ) -> Figure:
     """Charge tracks over time (Fig 6.3b, 6.4a): x, y, z of every track against frame (or
-    ``times``), one colour per track id, gaps where a group had dissolved; plus a top view.
-    ``truth (F, T, 3)`` or ``(T, 3)`` draws true target positions dotted."""
+    ``times``, seconds), one colour per track id, gaps where a group had dissolved; plus a
+    top view. ``truth (F, T, 3)`` or ``(T, 3)`` draws true target positions dotted.
+
+    The legend (outside the axes) names each track with at least ``legend_min_length``
+    charges and its core members; shorter tracks are drawn thin and grey, unnamed."""
     import matplotlib.pyplot as plt
 
-    fig, axs = plt.subplots(1, 4, figsize=(16, 3.8))
+    n_min = check_int(legend_min_length, "legend_min_length", min=1)
+    fig, axs = plt.subplots(1, 4, figsize=(17, 4.2), layout="constrained")
     cmap = plt.get_cmap("tab10")
-    tt = None if times is None else np.asarray(times, dtype=np.float64)
+    tt = None if times is None else as_float_array(times, "times", (None,))
+    handles = []
     for tr in tracks:
-        col = cmap(tr.id % 10)
+        real = len(tr) >= n_min
+        col = cmap(tr.id % 10) if real else (0.6, 0.6, 0.6)
+        lw = 1.6 if real else 0.8
         x = tr.frames.astype(np.float64) if tt is None else tt[tr.frames]
         # Break the line at gaps so dissolution shows.
         gaps = np.flatnonzero(np.diff(tr.frames) > 1) + 1
@@ -586,9 +690,11 @@ def plot_charge_tracks(
             for seg_x, seg_y in zip(
                 np.split(x, gaps), np.split(tr.positions[:, a], gaps), strict=True
             ):
-                axs[a].plot(
-                    seg_x, seg_y, color=col, lw=1.5, label=f"track {tr.id}" if a == 0 else None
-                )
+                (line,) = axs[a].plot(seg_x, seg_y, color=col, lw=lw)
+        if real:
+            who = ", ".join(str(i) for i in tr.core_members.tolist())
+            line.set_label(f"track {tr.id}: people {who} ({len(tr)} frames)")
+            handles.append(line)
         axs[3].plot(tr.positions[:, 0], tr.positions[:, 1], ".", color=col, ms=2)
     if truth is not None:
         T = np.asarray(truth, dtype=np.float64)
@@ -602,15 +708,21 @@ def plot_charge_tracks(
             for a in range(3):
                 axs[a].plot(x, T[:, :, a], "k:", lw=1)
             axs[3].plot(T[..., 0].ravel(), T[..., 1].ravel(), "k,", alpha=0.3)
+        (truth_line,) = axs[0].plot([], [], "k:", lw=1, label="true targets")
+        handles.append(truth_line)
     for a, name in enumerate("xyz"):
         axs[a].set_xlabel("frame" if tt is None else "time (s)")
         axs[a].set_ylabel(f"{name} (m)")
+        axs[a].set_title(f"{name} of each charge")
     axs[3].set_xlabel("x (m)")
     axs[3].set_ylabel("y (m)")
     axs[3].set_aspect("equal", adjustable="datalim")
     axs[3].set_title("top view")
-    if tracks:
-        axs[0].legend(fontsize=7, loc="best")
-    fig.suptitle(f"{len(tracks)} social charge tracks")
-    fig.tight_layout()
+    if handles:
+        fig.legend(handles=handles, loc="outside right upper", fontsize=8, frameon=False)
+    n_real = sum(len(tr) >= n_min for tr in tracks)
+    fig.suptitle(
+        f"social charge tracks: {n_real} of ≥ {n_min} frames"
+        + (f" (+{len(tracks) - n_real} shorter, grey)" if n_real < len(tracks) else "")
+    )
     return fig

@@ -10,7 +10,9 @@ use numpy::ndarray::{Array1, Array2, Array3};
 use numpy::{IntoPyArray, PyArray1, PyArray2, PyArray3, PyReadonlyArray1, PyReadonlyArray2};
 use pyo3::exceptions::PyValueError;
 use pyo3::prelude::*;
-use socialcore::saliency::{self as sal, Charge, GazeRays, Grid, ModeOptions, TrackOptions};
+use socialcore::saliency::{
+    self as sal, Charge, GazeRays, Grid, Membership, ModeOptions, TrackOptions,
+};
 
 use crate::convert::{rows, vec1};
 use crate::errors::{detach, map};
@@ -65,7 +67,7 @@ fn saliency_grid<'py>(
 ) -> PyResult<Bound<'py, PyArray3<f64>>> {
     let rays = gaze_rays(&p, &v, &h, None)?;
     let grid = map(Grid::new(lo, hi, shape))?;
-    let out = detach(py, || Ok(sal::saliency_grid(&rays, &grid)))?;
+    let out = detach(py, || sal::saliency_grid(&rays, &grid))?;
     let arr = Array3::from_shape_vec((shape[0], shape[1], shape[2]), out)
         .map_err(|e| PyValueError::new_err(format!("shape: {e}")))?;
     Ok(arr.into_pyarray(py))
@@ -84,15 +86,84 @@ type ChargeArrays<'py> = (
     Bound<'py, PyArray2<f64>>,
 );
 
-/// Mode seeking on every frame (Eq 6.5–6.8). Returns, over all charges `C`: `frame (C,)`,
+/// The fields of `socialcam.ChargeOptions` (the frozen dataclass validated in Python),
+/// read by attribute so that the option list is written once.
+#[derive(FromPyObject)]
+pub struct PyChargeOptions {
+    #[pyo3(attribute)]
+    seeds_per_ray: usize,
+    #[pyo3(attribute)]
+    depth_range: (f64, f64),
+    #[pyo3(attribute)]
+    pair_seeds: bool,
+    #[pyo3(attribute)]
+    tol: f64,
+    #[pyo3(attribute)]
+    newton: bool,
+    #[pyo3(attribute)]
+    max_iter: usize,
+    #[pyo3(attribute)]
+    merge_radius: f64,
+    #[pyo3(attribute)]
+    member_sigma: f64,
+    #[pyo3(attribute)]
+    min_members: usize,
+    #[pyo3(attribute)]
+    membership: String,
+    #[pyo3(attribute)]
+    charge_penalty: f64,
+    #[pyo3(attribute)]
+    min_magnitude: f64,
+    #[pyo3(attribute)]
+    bounds: Option<([f64; 3], [f64; 3])>,
+    #[pyo3(attribute)]
+    region_level: f64,
+    #[pyo3(attribute)]
+    region_max_radius: f64,
+}
+
+impl PyChargeOptions {
+    fn to_core(&self) -> PyResult<ModeOptions> {
+        let membership = match self.membership.as_str() {
+            "cover" => Membership::Cover,
+            "strongest" => Membership::Strongest,
+            "all" => Membership::All,
+            other => {
+                return Err(PyValueError::new_err(format!(
+                    "membership: expected 'cover', 'strongest' or 'all', got {other:?}"
+                )))
+            }
+        };
+        Ok(ModeOptions {
+            seeds_per_ray: self.seeds_per_ray,
+            depth_min: self.depth_range.0,
+            depth_max: self.depth_range.1,
+            pair_seeds: self.pair_seeds,
+            tol: self.tol,
+            newton: self.newton,
+            max_iter: self.max_iter,
+            merge_radius: self.merge_radius,
+            member_sigma: self.member_sigma,
+            min_members: self.min_members,
+            membership,
+            charge_penalty: self.charge_penalty,
+            min_magnitude: self.min_magnitude,
+            bounds: self
+                .bounds
+                .map(|(lo, hi)| (Vector3::from(lo), Vector3::from(hi))),
+            region_level: self.region_level,
+            region_max_radius: self.region_max_radius,
+        })
+    }
+}
+
+/// Mode seeking on every frame (Eq 6.5–6.8) with the options of a
+/// `socialcam.ChargeOptions`. Returns, over all charges `C`: `frame (C,)`,
 /// `position (C,3)`, `magnitude (C,)`, `support (C,)`, `members` (flat ray indices within
 /// the frame) with `member_offsets (C+1,)`, `membership` (flat, `N_f` values per charge),
 /// `region_centre (C,3)`, `region_axes (C,3,3)` (columns are the axes), `region_radii (C,3)`.
 #[pyfunction]
-#[pyo3(signature = (p, v, h, offsets, seed, seeds_per_ray=20, depth_min=0.3, depth_max=10.0,
-    tol=1e-5, newton=true, max_iter=100, merge_radius=0.2, member_sigma=2.5, min_members=2,
-    exclusive=true, min_magnitude=0.0, bounds=None, region_level=0.8, region_max_radius=10.0))]
-#[allow(clippy::too_many_arguments)]
+#[pyo3(signature = (p, v, h, offsets, seed, options))]
 fn find_charges<'py>(
     py: Python<'py>,
     p: PyReadonlyArray2<'py, f64>,
@@ -100,37 +171,9 @@ fn find_charges<'py>(
     h: PyReadonlyArray1<'py, f64>,
     offsets: PyReadonlyArray1<'py, i64>,
     seed: u64,
-    seeds_per_ray: usize,
-    depth_min: f64,
-    depth_max: f64,
-    tol: f64,
-    newton: bool,
-    max_iter: usize,
-    merge_radius: f64,
-    member_sigma: f64,
-    min_members: usize,
-    exclusive: bool,
-    min_magnitude: f64,
-    bounds: Option<([f64; 3], [f64; 3])>,
-    region_level: f64,
-    region_max_radius: f64,
+    options: PyChargeOptions,
 ) -> PyResult<ChargeArrays<'py>> {
-    let opts = ModeOptions {
-        seeds_per_ray,
-        depth_min,
-        depth_max,
-        tol,
-        newton,
-        max_iter,
-        merge_radius,
-        member_sigma,
-        min_members,
-        exclusive,
-        min_magnitude,
-        bounds: bounds.map(|(lo, hi)| (Vector3::from(lo), Vector3::from(hi))),
-        region_level,
-        region_max_radius,
-    };
+    let opts = options.to_core()?;
     map(opts.validate())?;
     let (pf, n) = rows(&p, "p", 3)?;
     let (vf, nv) = rows(&v, "v", 3)?;
@@ -220,9 +263,12 @@ fn find_charges<'py>(
 }
 
 /// Classic mean-shift tracking of membership features `(n, J)` with frames `(n,)`
-/// (Sec 6.1.3) → track id per charge `(n,)` (−1 = dropped duplicate) and centres `(K, J)`.
+/// (Sec 6.1.3) → track id per charge `(n,)` (−1 = dropped: a duplicate in its frame, or
+/// part of a run shorter than `min_length`) and centres `(K, J)`.
 #[pyfunction]
-#[pyo3(signature = (features, frames, bandwidth=0.3, max_iter=300, bin_seeding=true))]
+#[pyo3(signature = (features, frames, bandwidth=0.3, max_iter=300, bin_seeding=true,
+    max_gap=5, min_length=10))]
+#[allow(clippy::too_many_arguments)]
 fn track_charges<'py>(
     py: Python<'py>,
     features: PyReadonlyArray2<'py, f64>,
@@ -230,6 +276,8 @@ fn track_charges<'py>(
     bandwidth: f64,
     max_iter: usize,
     bin_seeding: bool,
+    max_gap: usize,
+    min_length: usize,
 ) -> PyResult<(Bound<'py, PyArray1<i64>>, Bound<'py, PyArray2<f64>>)> {
     let fa = features.as_array();
     let j = fa.ncols();
@@ -244,6 +292,8 @@ fn track_charges<'py>(
         bandwidth,
         max_iter,
         bin_seeding,
+        max_gap,
+        min_length,
     };
     let tr = detach(py, || sal::track_charges(&feats, &fr, &opts))?;
     let mut centres = Array2::<f64>::zeros((tr.centres.len(), j));

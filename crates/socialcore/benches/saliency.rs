@@ -35,7 +35,7 @@ fn bench(c: &mut Criterion) {
     });
     let grid = Grid::new([-1.0, -1.0, 0.0], [7.0, 4.0, 3.0], [64, 64, 64]).expect("grid");
     c.bench_function("saliency_grid 11 rays on 64^3", |b| {
-        b.iter(|| saliency_grid(black_box(&rays), &grid))
+        b.iter(|| saliency_grid(black_box(&rays), &grid).expect("grid"))
     });
 }
 

@@ -34,7 +34,14 @@ from socialcam.synth.mafia import MafiaScene, mafia
 from socialcam.synth.observe import Observations, observe
 from socialcam.synth.people import People, looking_at, primary_from_true, wander
 from socialcam.synth.points import random_points, smooth_trajectories
-from socialcam.synth.social import SocialScene, meeting, mocap_replica, party
+from socialcam.synth.social import (
+    SocialScene,
+    marker_check,
+    marker_check_family,
+    meeting,
+    mocap_replica,
+    party,
+)
 
 
 @dataclass(frozen=True)
@@ -75,6 +82,8 @@ __all__ = [
     "look_at",
     "looking_at",
     "mafia",
+    "marker_check",
+    "marker_check_family",
     "meeting",
     "mocap_replica",
     "multiview_scene",

@@ -97,8 +97,12 @@ pub fn ray_hessian(rays: &GazeRays, x: &Vector3<f64>) -> Matrix3<f64> {
     total / n as f64
 }
 
+/// The largest grid [`Grid::new`] accepts: 2²⁸ samples, 2 GiB of float64.
+pub const MAX_GRID_CELLS: usize = 1 << 28;
+
 /// A regular grid of sample points: axis `a` has `shape[a]` points from `lo[a]` to `hi[a]`
 /// inclusive (like `numpy.linspace`); an axis with one point sits at `lo[a]`.
+
 #[derive(Debug, Clone, Copy, PartialEq)]
 pub struct Grid {
     pub lo: [f64; 3],
@@ -123,6 +127,19 @@ impl Grid {
                 format!("{shape:?} has an empty axis"),
             ));
         }
+        let cells = shape
+            .iter()
+            .try_fold(1usize, |acc, &n| acc.checked_mul(n))
+            .filter(|&c| c <= MAX_GRID_CELLS);
+        if cells.is_none() {
+            return Err(Error::invalid(
+                "shape",
+                format!(
+                    "{shape:?} asks for more than {MAX_GRID_CELLS} samples ({} GiB of float64)",
+                    (MAX_GRID_CELLS * 8) >> 30
+                ),
+            ));
+        }
         Ok(Grid { lo, hi, shape })
     }
 
@@ -139,18 +156,23 @@ impl Grid {
 
 /// The field sampled on a grid, in C order (last axis fastest), parallel over the first
 /// two axes.
-pub fn saliency_grid(rays: &GazeRays, grid: &Grid) -> Vec<f64> {
+pub fn saliency_grid(rays: &GazeRays, grid: &Grid) -> Result<Vec<f64>> {
     let [nx, ny, nz] = grid.shape;
     let zs: Vec<f64> = (0..nz).map(|k| grid.coord(2, k)).collect();
     let mut out = vec![0.0; nx * ny * nz];
-    out.par_chunks_mut(nz).enumerate().for_each(|(row, dst)| {
-        let x = grid.coord(0, row / ny);
-        let y = grid.coord(1, row % ny);
-        for (k, z) in zs.iter().enumerate() {
-            dst[k] = saliency(rays, &Vector3::new(x, y, *z));
-        }
-    });
-    out
+    out.par_chunks_mut(nz)
+        .enumerate()
+        .try_for_each(|(row, dst)| {
+            // One check per grid row (nz samples): Ctrl-C stops a large grid promptly.
+            crate::interrupt::check()?;
+            let x = grid.coord(0, row / ny);
+            let y = grid.coord(1, row % ny);
+            for (k, z) in zs.iter().enumerate() {
+                dst[k] = saliency(rays, &Vector3::new(x, y, *z));
+            }
+            Ok(())
+        })?;
+    Ok(out)
 }
 
 #[cfg(test)]
@@ -225,7 +247,7 @@ mod tests {
     fn grid_is_c_ordered_linspace() {
         let r = two_rays();
         let g = Grid::new([-1.0, -1.0, 0.0], [1.0, 2.0, 0.0], [3, 4, 1]).unwrap();
-        let vals = saliency_grid(&r, &g);
+        let vals = saliency_grid(&r, &g).unwrap();
         assert_eq!(vals.len(), 12);
         for i in 0..3 {
             for j in 0..4 {
@@ -235,6 +257,8 @@ mod tests {
         }
         assert!(Grid::new([0.0; 3], [1.0, -1.0, 1.0], [2, 2, 2]).is_err());
         assert!(Grid::new([0.0; 3], [1.0; 3], [2, 0, 2]).is_err());
+        assert!(Grid::new([0.0; 3], [1.0; 3], [100_000; 3]).is_err());
+        assert!(Grid::new([0.0; 3], [1.0; 3], [usize::MAX, 2, 2]).is_err());
         assert!(saliency_at(&r, &[Vector3::new(f64::NAN, 0.0, 0.0)]).is_err());
     }
 

@@ -34,7 +34,7 @@ pub mod modes;
 pub mod tracking;
 
 pub use field::{ray_density, ray_hessian, saliency, saliency_at, saliency_grid, Grid};
-pub use modes::{find_charges, find_charges_sequence, Charge, Ellipsoid, ModeOptions};
+pub use modes::{find_charges, find_charges_sequence, Charge, Ellipsoid, Membership, ModeOptions};
 pub use tracking::{track_charges, TrackOptions, Tracking};
 
 use crate::error::{ensure_finite, Error, Result};

@@ -36,13 +36,18 @@ pub struct ModeOptions {
     /// Charges with fewer member rays are rejected (Sec 6.2: more than one gaze ray must
     /// contribute), so the default is 2.
     pub min_members: usize,
-    /// Winner-take-all membership: a ray counts as a member only of the strongest charge
-    /// it is within `member_sigma` of (a person attends to one thing at a time, Ch 7).
-    /// Charges are accepted strongest first and `min_members` applies to the rays still
-    /// free. This rejects the spurious "charges" where rays of two different groups cross
-    /// behind their own targets. `false` gives the thesis' rule: every ray within
-    /// `member_sigma` counts.
-    pub exclusive: bool,
+    /// How rays are shared among candidate modes and which candidates are accepted (see
+    /// [`Membership`]).
+    pub membership: Membership,
+    /// [`Membership::Cover`] only: the price of one more charge, in units of the rays'
+    /// log-likelihood `½‖d/h‖²`. A candidate is kept only if the rays it explains fit it
+    /// better, in total, than this price (plus what they would cost elsewhere).
+    pub charge_penalty: f64,
+    /// Also start one climb at the near-intersection of every pair of rays that pass
+    /// within `member_sigma` bandwidths of each other (Sec 6.2 samples seeds along the
+    /// rays only; with narrow bandwidths the stratified seeds then often miss a mode's
+    /// basin, which is only about `member_sigma·h·depth / sin(angle)` long on each ray).
+    pub pair_seeds: bool,
     /// Charges whose field value is below this are rejected.
     pub min_magnitude: f64,
     /// Optional box `(lo, hi)` outside of which modes are rejected (for example a room).
@@ -66,7 +71,9 @@ impl Default for ModeOptions {
             merge_radius: 0.2,
             member_sigma: 2.5,
             min_members: 2,
-            exclusive: true,
+            membership: Membership::Strongest,
+            charge_penalty: 2.0,
+            pair_seeds: true,
             min_magnitude: 0.0,
             bounds: None,
             region_level: 0.8,
@@ -118,6 +125,12 @@ impl ModeOptions {
         if self.min_members == 0 {
             return bad("min_members", "must be at least 1".into());
         }
+        if !(self.charge_penalty.is_finite() && self.charge_penalty >= 0.0) {
+            return bad(
+                "charge_penalty",
+                format!("{} must be finite and ≥ 0", self.charge_penalty),
+            );
+        }
         if !self.min_magnitude.is_finite() {
             return bad("min_magnitude", "must be finite".into());
         }
@@ -142,6 +155,33 @@ impl ModeOptions {
         }
         Ok(())
     }
+}
+
+/// How [`find_charges`] decides which rays belong to which charge, and so which modes
+/// are charges.
+#[derive(Debug, Clone, Copy, PartialEq, Eq)]
+pub enum Membership {
+    /// The thesis' rule (Sec 6.2): every mode with at least `min_members` rays within
+    /// `member_sigma` bandwidths is a charge, and a ray may belong to several. Crossings of
+    /// rays of different groups, and the several modes a noisy group can make, all count.
+    All,
+    /// Winner-take-all, strongest first (the default): a ray belongs only to the strongest
+    /// charge it is within `member_sigma` of; `min_members` applies to the rays still
+    /// free. This rejects most crossings of rays of different groups behind their targets,
+    /// but drops real charges whose rays pass near a stronger one (wide bandwidths) or that
+    /// such a crossing outbids.
+    Strongest,
+    /// A set cover (experimental; on the held-out marker scenes it splits noisy groups
+    /// into sub-modes more often than `Strongest`, see the issue-13 note): choose the set of candidate modes that best explains
+    /// the rays. Every ray belongs to the candidate it fits best (smallest `‖d/h‖`), if it
+    /// is within `member_sigma` of one; the score is
+    /// `−½ Σ‖d/h‖² (members) − ½ member_sigma² (rays left out) − charge_penalty · #charges`,
+    /// every charge needs `min_members` rays. Candidates are removed one at a time (the
+    /// removal that gives the best score; forced while a charge has too few members)
+    /// until no removal raises the score. Each accepted charge is then moved to the mode
+    /// of its own members' field (Eq 6.7 on the members only), so that other groups' rays
+    /// passing nearby do not pull it.
+    Cover,
 }
 
 /// An ellipsoid `{x : Σₖ ((x − c)ᵀaₖ / rₖ)² ≤ 1}` with unit axes `aₖ` (columns of
@@ -566,14 +606,27 @@ fn confidence_region(
     }
 }
 
-fn charges_of_frame(rays: &GazeRays, opts: &ModeOptions, seed: u64, parallel: bool) -> Vec<Charge> {
-    let seeds: Vec<Vector3<f64>> = (0..rays.len())
+fn charges_of_frame(
+    rays: &GazeRays,
+    opts: &ModeOptions,
+    seed: u64,
+    parallel: bool,
+) -> Result<Vec<Charge>> {
+    let mut seeds: Vec<Vector3<f64>> = (0..rays.len())
         .flat_map(|i| seeds_of_ray(rays, i, opts, seed))
         .collect();
+    if opts.pair_seeds {
+        seeds.extend(pair_seeds(rays, opts));
+    }
+    // One interrupt check per climb (at most `max_iter` field evaluations).
+    let climb_checked = |s: &Vector3<f64>| -> Result<Climb> {
+        crate::interrupt::check()?;
+        Ok(climb(rays, *s, opts))
+    };
     let climbs: Vec<Climb> = if parallel {
-        seeds.par_iter().map(|s| climb(rays, *s, opts)).collect()
+        seeds.par_iter().map(climb_checked).collect::<Result<_>>()?
     } else {
-        seeds.iter().map(|s| climb(rays, *s, opts)).collect()
+        seeds.iter().map(climb_checked).collect::<Result<_>>()?
     };
     // Merge in seed order: the result never depends on how the climbs were scheduled.
     let mut modes: Vec<(Vector3<f64>, f64, usize)> = Vec::new();
@@ -605,24 +658,178 @@ fn charges_of_frame(rays: &GazeRays, opts: &ModeOptions, seed: u64, parallel: bo
             .then_with(|| a.position.y.total_cmp(&b.position.y))
             .then_with(|| a.position.z.total_cmp(&b.position.z))
     });
-    let mut charges = if opts.exclusive {
-        let mut taken = vec![false; rays.len()];
-        let mut kept = Vec::with_capacity(candidates.len());
-        for mut c in candidates {
-            c.members.retain(|&i| !taken[i]);
-            if c.members.len() >= opts.min_members {
-                c.members.iter().for_each(|&i| taken[i] = true);
-                kept.push(c);
+    let mut charges = match opts.membership {
+        Membership::All => candidates,
+        Membership::Strongest => {
+            let mut taken = vec![false; rays.len()];
+            let mut kept = Vec::with_capacity(candidates.len());
+            for mut c in candidates {
+                c.members.retain(|&i| !taken[i]);
+                if c.members.len() >= opts.min_members {
+                    c.members.iter().for_each(|&i| taken[i] = true);
+                    kept.push(c);
+                }
             }
+            kept
         }
-        kept
-    } else {
-        candidates
+        Membership::Cover => cover(rays, candidates, opts)?,
     };
     for c in charges.iter_mut() {
         c.region = confidence_region(rays, &c.position, c.magnitude, opts);
     }
-    charges
+    Ok(charges)
+}
+
+/// Seeds at the near-intersections of ray pairs ([`ModeOptions::pair_seeds`]): for every
+/// pair `i < j` of non-parallel rays, the midpoint of the shortest segment between the two
+/// lines, if it lies in front of both eyes and within `member_sigma` bandwidths of both.
+fn pair_seeds(rays: &GazeRays, opts: &ModeOptions) -> Vec<Vector3<f64>> {
+    let n = rays.len();
+    let m2 = opts.member_sigma * opts.member_sigma;
+    let mut out = Vec::new();
+    for i in 0..n {
+        for j in i + 1..n {
+            let (pi, vi, pj, vj) = (&rays.p[i], &rays.v[i], &rays.p[j], &rays.v[j]);
+            let b = vi.dot(vj);
+            let denom = 1.0 - b * b;
+            if denom < 1e-12 {
+                continue; // parallel: no single closest point
+            }
+            let w0 = pi - pj;
+            let (d, e) = (vi.dot(&w0), vj.dot(&w0));
+            let si = (b * e - d) / denom;
+            let sj = (e - b * d) / denom;
+            if si <= 0.0 || sj <= 0.0 {
+                continue;
+            }
+            let x = (pi + vi * si + pj + vj * sj) * 0.5;
+            if q_of(rays, i, &x) <= m2 && q_of(rays, j, &x) <= m2 {
+                out.push(x);
+            }
+        }
+    }
+    out
+}
+
+/// `‖d/h‖²` of ray `i` at `x` (Eq 6.2), infinite behind the eye.
+fn q_of(rays: &GazeRays, i: usize, x: &Vector3<f64>) -> f64 {
+    match crate::geometry::perspective_distance(&rays.p[i], &rays.v[i], x) {
+        Some(d) => d.norm_squared() * rays.inv_h2[i],
+        None => f64::INFINITY,
+    }
+}
+
+/// Assignment of every ray to its best-fitting live candidate (`None`: none within
+/// `member_sigma`), and the score of [`Membership::Cover`] with whether every live
+/// candidate has `min_members` rays.
+struct CoverState {
+    owner: Vec<Option<usize>>,
+    count: Vec<usize>,
+    score: f64,
+    feasible: bool,
+}
+
+fn cover_state(q: &[Vec<f64>], alive: &[bool], opts: &ModeOptions) -> CoverState {
+    let m2 = opts.member_sigma * opts.member_sigma;
+    let n = q.first().map_or(0, Vec::len);
+    let mut owner = vec![None; n];
+    let mut count = vec![0usize; q.len()];
+    let mut score = 0.0;
+    for (i, o) in owner.iter_mut().enumerate() {
+        let mut best: Option<(usize, f64)> = None;
+        for (c, qc) in q.iter().enumerate() {
+            // Ties go to the earlier (stronger) candidate.
+            if alive[c] && qc[i] <= m2 && best.map_or(true, |(_, b)| qc[i] < b) {
+                best = Some((c, qc[i]));
+            }
+        }
+        match best {
+            Some((c, qi)) => {
+                *o = Some(c);
+                count[c] += 1;
+                score -= 0.5 * qi;
+            }
+            None => score -= 0.5 * m2,
+        }
+    }
+    let live = alive.iter().filter(|&&a| a).count();
+    score -= opts.charge_penalty * live as f64;
+    let feasible = (0..q.len()).all(|c| !alive[c] || count[c] >= opts.min_members);
+    CoverState {
+        owner,
+        count,
+        score,
+        feasible,
+    }
+}
+
+/// [`Membership::Cover`]: backward elimination over the candidates (strongest first),
+/// then each kept charge moved to the mode of its members' own field.
+fn cover(rays: &GazeRays, candidates: Vec<Charge>, opts: &ModeOptions) -> Result<Vec<Charge>> {
+    let n = rays.len();
+    let q: Vec<Vec<f64>> = candidates
+        .iter()
+        .map(|c| (0..n).map(|i| q_of(rays, i, &c.position)).collect())
+        .collect();
+    let mut alive = vec![true; candidates.len()];
+    let mut state = cover_state(&q, &alive, opts);
+    while alive.iter().any(|&a| a) {
+        crate::interrupt::check()?;
+        // Forced: while a live candidate has too few rays, one of those must go.
+        let forced = !state.feasible;
+        let mut best: Option<(usize, CoverState)> = None;
+        for c in 0..candidates.len() {
+            if !alive[c] || (forced && state.count[c] >= opts.min_members) {
+                continue;
+            }
+            alive[c] = false;
+            let st = cover_state(&q, &alive, opts);
+            alive[c] = true;
+            // Strictly better only, so ties keep the earlier (stronger) removal choice.
+            if best.as_ref().map_or(true, |(_, b)| st.score > b.score) {
+                best = Some((c, st));
+            }
+        }
+        let Some((c, st)) = best else { break };
+        if !forced && st.score <= state.score {
+            break;
+        }
+        alive[c] = false;
+        state = st;
+    }
+    let mut kept = Vec::new();
+    for (c, mut ch) in candidates.into_iter().enumerate() {
+        if !alive[c] {
+            continue;
+        }
+        ch.members = (0..n).filter(|&i| state.owner[i] == Some(c)).collect();
+        // Mode of the members' own field, climbed from the candidate.
+        let sub = GazeRays::new(
+            ch.members.iter().map(|&i| rays.p[i]).collect(),
+            ch.members.iter().map(|&i| rays.v[i]).collect(),
+            ch.members.iter().map(|&i| rays.h[i]).collect(),
+            None,
+        )?;
+        let own = climb(&sub, ch.position, opts);
+        if own.converged {
+            ch.position = own.x;
+        }
+        ch.magnitude = saliency(rays, &ch.position);
+        let fi: Vec<f64> = (0..n)
+            .map(|i| super::field::ray_density(rays, i, &ch.position))
+            .collect();
+        let norm = fi.iter().map(|f| f * f).sum::<f64>().sqrt();
+        if norm > 0.0 {
+            ch.membership = fi.iter().map(|f| f / norm).collect();
+        }
+        kept.push(ch);
+    }
+    kept.sort_by(|a, b| {
+        b.magnitude
+            .total_cmp(&a.magnitude)
+            .then_with(|| a.position.x.total_cmp(&b.position.x))
+    });
+    Ok(kept)
 }
 
 /// The social charges of one frame (Sec 6.1.2): mean-shift (Eq 6.7) from seeds along every
@@ -632,7 +839,8 @@ fn charges_of_frame(rays: &GazeRays, opts: &ModeOptions, seed: u64, parallel: bo
 /// give an empty list. Same `seed`, same result, whatever the thread count.
 pub fn find_charges(rays: &GazeRays, opts: &ModeOptions, seed: u64) -> Result<Vec<Charge>> {
     opts.validate()?;
-    Ok(charges_of_frame(rays, opts, seed, true))
+    check_seed_memory(rays.len(), opts)?;
+    charges_of_frame(rays, opts, seed, true)
 }
 
 /// [`find_charges`] on every frame of a sequence, parallel over frames; frame `t` gives
@@ -643,10 +851,39 @@ pub fn find_charges_sequence(
     seed: u64,
 ) -> Result<Vec<Vec<Charge>>> {
     opts.validate()?;
-    Ok(frames
+    let widest = frames.iter().map(GazeRays::len).max().unwrap_or(0);
+    // Frames run in parallel: each worker holds one frame's seeds at a time.
+    check_seed_memory(widest.saturating_mul(rayon::current_num_threads()), opts)?;
+    frames
         .par_iter()
         .map(|rays| charges_of_frame(rays, opts, seed, false))
-        .collect())
+        .collect()
+}
+
+/// The most memory the seeds and climbs of one call may take (2 GiB).
+const MAX_SEED_BYTES: usize = 1 << 31;
+
+/// Refuses `seeds_per_ray` (with `n_rays` rays at once) whose seeds and climbs would not
+/// fit in [`MAX_SEED_BYTES`], before anything is allocated.
+fn check_seed_memory(n_rays: usize, opts: &ModeOptions) -> Result<()> {
+    let per_seed = std::mem::size_of::<Vector3<f64>>() + std::mem::size_of::<Climb>();
+    let pairs = n_rays.saturating_mul(n_rays.saturating_sub(1)) / 2;
+    let bytes = n_rays
+        .saturating_mul(opts.seeds_per_ray)
+        .saturating_add(pairs)
+        .saturating_mul(per_seed);
+    if bytes > MAX_SEED_BYTES {
+        return Err(Error::invalid(
+            "seeds_per_ray",
+            format!(
+                "{} seeds per ray on {n_rays} rays need {} MiB (more than {} MiB)",
+                opts.seeds_per_ray,
+                bytes >> 20,
+                MAX_SEED_BYTES >> 20
+            ),
+        ));
+    }
+    Ok(())
 }
 
 #[cfg(test)]
@@ -736,7 +973,7 @@ mod tests {
         // a mode fed by two rays. Winner-take-all membership rejects it (both rays belong to
         // stronger charges); the thesis' rule keeps it; so does a box that excludes it.
         let o = ModeOptions {
-            exclusive: false,
+            membership: Membership::All,
             ..Default::default()
         };
         let all = find_charges(&rays, &o, 3).unwrap();
@@ -748,6 +985,95 @@ mod tests {
             ..o
         };
         assert_eq!(find_charges(&rays, &o, 3).unwrap().len(), 2);
+    }
+
+    #[test]
+    fn cover_keeps_both_pairs_that_a_crossing_would_split() {
+        // Pairs A = {a, a'} and B = {b, b'} meet exactly at their targets; a and b also
+        // cross exactly at X, behind both targets. Three exact two-ray modes of equal
+        // strength: the thesis' rule keeps all three, the set cover keeps A and B.
+        let (ta, tb, x) = (
+            Vector3::new(0.0, 0.0, 1.0),
+            Vector3::new(3.0, -1.0, 1.0),
+            Vector3::new(3.0, 0.0, 1.0),
+        );
+        let p = vec![
+            Vector3::new(-4.0, 0.0, 1.0), // a: through A, on to X
+            Vector3::new(0.0, -3.0, 1.0), // a'
+            Vector3::new(3.0, -4.0, 1.0), // b: through B, on to X
+            Vector3::new(3.0, -1.0, 4.0), // b'
+        ];
+        let v = vec![
+            (ta - p[0]).normalize(),
+            (ta - p[1]).normalize(),
+            (tb - p[2]).normalize(),
+            (tb - p[3]).normalize(),
+        ];
+        let rays = GazeRays::new(p, v, vec![0.02; 4], None).unwrap();
+        let all = ModeOptions {
+            membership: Membership::All,
+            ..Default::default()
+        };
+        let thesis = find_charges(&rays, &all, 1).unwrap();
+        assert_eq!(thesis.len(), 3);
+        assert!(thesis.iter().any(|c| (c.position - x).norm() < 1e-4));
+        let cover = ModeOptions {
+            membership: Membership::Cover,
+            ..Default::default()
+        };
+        let charges = find_charges(&rays, &cover, 1).unwrap();
+        assert_eq!(charges.len(), 2, "{charges:?}");
+        let ca = charges
+            .iter()
+            .find(|c| (c.position - ta).norm() < 1e-4)
+            .unwrap();
+        let cb = charges
+            .iter()
+            .find(|c| (c.position - tb).norm() < 1e-4)
+            .unwrap();
+        assert_eq!(ca.members, vec![0, 1]);
+        assert_eq!(cb.members, vec![2, 3]);
+    }
+
+    #[test]
+    fn pair_seeds_find_a_narrow_mode_the_stratified_seeds_miss() {
+        // Two narrow rays (h = 0.002) meeting at right angles 7.3 m away: the mode's basin
+        // on each ray is a few centimetres long, shorter than the spacing of 3 seeds.
+        let t = Vector3::new(0.0, 0.0, 1.0);
+        let p = vec![Vector3::new(-7.3, 0.0, 1.0), Vector3::new(0.0, -7.3, 1.0)];
+        let v = p.iter().map(|p| (t - p).normalize()).collect();
+        let rays = GazeRays::new(p, v, vec![0.002; 2], None).unwrap();
+        let few = ModeOptions {
+            seeds_per_ray: 3,
+            pair_seeds: false,
+            ..Default::default()
+        };
+        assert!(find_charges(&rays, &few, 0).unwrap().is_empty());
+        let with_pairs = ModeOptions {
+            pair_seeds: true,
+            ..few
+        };
+        let c = find_charges(&rays, &with_pairs, 0).unwrap();
+        assert_eq!(c.len(), 1);
+        assert!((c[0].position - t).norm() < 1e-4);
+    }
+
+    #[test]
+    fn huge_seed_counts_are_refused_before_allocating() {
+        let rays = rays_at(
+            &circle(3, 2.0, Vector3::zeros(), 0.5, 0.0),
+            Vector3::zeros(),
+            0.1,
+            0,
+        );
+        let o = ModeOptions {
+            seeds_per_ray: 1_000_000_000_000,
+            ..Default::default()
+        };
+        assert!(matches!(
+            find_charges(&rays, &o, 0),
+            Err(Error::InvalidInput { arg, .. }) if arg == "seeds_per_ray"
+        ));
     }
 
     #[test]

@@ -21,6 +21,14 @@ pub struct TrackOptions {
     /// first feature; as scikit-learn's `bin_seeding`) instead of one per feature: far
     /// fewer climbs, same clusters in practice.
     pub bin_seeding: bool,
+    /// Frames of a track closer than `max_gap + 1` apart (at most `max_gap` missing frames
+    /// between them) belong to the same run; a longer gap starts a new run (the group
+    /// dissolved and re-formed: same track id, a new run).
+    pub max_gap: usize,
+    /// Runs with fewer charges than this are dropped (their charges get track −1): the
+    /// short-lived clusters that transitions make (people switching targets one by one
+    /// form intermediate groups for a few frames). Tracks left without charges vanish.
+    pub min_length: usize,
 }
 
 impl Default for TrackOptions {
@@ -29,6 +37,8 @@ impl Default for TrackOptions {
             bandwidth: 0.3,
             max_iter: 300,
             bin_seeding: true,
+            max_gap: 5,
+            min_length: 10,
         }
     }
 }
@@ -146,8 +156,11 @@ pub fn track_charges(
     };
     let modes: Vec<Option<(Vec<f64>, usize)>> = seeds
         .par_iter()
-        .map(|s| climb(&rows, s, bw, opts.max_iter))
-        .collect();
+        .map(|s| {
+            crate::interrupt::check()?;
+            Ok(climb(&rows, s, bw, opts.max_iter))
+        })
+        .collect::<Result<_>>()?;
     // Most populated modes first (ties: seed order); drop modes near a kept one.
     let mut order: Vec<(Vec<f64>, usize, usize)> = modes
         .into_iter()
@@ -210,8 +223,64 @@ pub fn track_charges(
     for (&(c, _), &k) in &best {
         track[k] = id_of[c];
     }
-    let centres = used.iter().map(|&(_, _, c)| centres[c].clone()).collect();
-    Ok(Tracking { track, centres })
+    let centres: Vec<Vec<f64>> = used.iter().map(|&(_, _, c)| centres[c].clone()).collect();
+    Ok(drop_short_runs(track, centres, frames, opts))
+}
+
+/// Applies [`TrackOptions::max_gap`] and [`TrackOptions::min_length`]: drops the charges of
+/// short runs, then the tracks left empty, and renumbers the rest by first appearance.
+fn drop_short_runs(
+    mut track: Vec<i64>,
+    centres: Vec<Vec<f64>>,
+    frames: &[usize],
+    opts: &TrackOptions,
+) -> Tracking {
+    let mut by_track: Vec<Vec<usize>> = vec![Vec::new(); centres.len()];
+    for (k, &t) in track.iter().enumerate() {
+        if let Ok(t) = usize::try_from(t) {
+            by_track[t].push(k);
+        }
+    }
+    for ks in by_track.iter_mut() {
+        ks.sort_by_key(|&k| frames[k]);
+        let mut start = 0;
+        for e in 1..=ks.len() {
+            let split = e == ks.len() || frames[ks[e]] - frames[ks[e - 1]] > opts.max_gap + 1;
+            if split {
+                if e - start < opts.min_length {
+                    ks[start..e].iter().for_each(|&k| track[k] = -1);
+                }
+                start = e;
+            }
+        }
+    }
+    // Renumber the surviving tracks by first appearance (frame, then charge index).
+    let mut first: Vec<Option<(usize, usize)>> = vec![None; centres.len()];
+    for (k, &t) in track.iter().enumerate() {
+        if let Ok(t) = usize::try_from(t) {
+            let key = (frames[k], k);
+            if first[t].map_or(true, |f| key < f) {
+                first[t] = Some(key);
+            }
+        }
+    }
+    let mut order: Vec<(usize, usize, usize)> = first
+        .iter()
+        .enumerate()
+        .filter_map(|(t, f)| f.map(|(frame, k)| (frame, k, t)))
+        .collect();
+    order.sort();
+    let mut new_id = vec![-1i64; centres.len()];
+    for (id, &(_, _, t)) in order.iter().enumerate() {
+        new_id[t] = id as i64;
+    }
+    for t in track.iter_mut() {
+        if let Ok(old) = usize::try_from(*t) {
+            *t = new_id[old];
+        }
+    }
+    let centres = order.iter().map(|&(_, _, t)| centres[t].clone()).collect();
+    Tracking { track, centres }
 }
 
 #[cfg(test)]
