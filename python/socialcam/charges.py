@@ -24,6 +24,7 @@ import numpy.typing as npt
 from socialcam import _core
 from socialcam._validate import (
     FloatArray,
+    apply_overrides,
     as_float_array,
     check_choice,
     check_float,
@@ -349,21 +350,7 @@ class ChargeOptions:
 def _options(options: ChargeOptions | None, overrides: dict[str, Any]) -> ChargeOptions:
     """``options`` (default: ``ChargeOptions()``) with ``overrides`` (field names) applied;
     an unknown name raises ``ValueError`` naming it."""
-    if options is None:
-        base = ChargeOptions()
-    elif isinstance(options, ChargeOptions):
-        base = options
-    else:
-        raise ValueError(f"options: expected a ChargeOptions, got {type(options).__name__}")
-    if not overrides:
-        return base
-    names = {f.name for f in dataclasses.fields(ChargeOptions)}
-    unknown = sorted(set(overrides) - names)
-    if unknown:
-        raise ValueError(
-            f"{unknown[0]}: not an option of ChargeOptions (options: {', '.join(sorted(names))})"
-        )
-    return dataclasses.replace(base, **overrides)
+    return apply_overrides(options, ChargeOptions, overrides)
 
 
 def _run(frames: Sequence[GazeRays], seed: int, options: ChargeOptions) -> list[list[Charge]]:
