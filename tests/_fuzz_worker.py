@@ -15,6 +15,7 @@ argument conversion) or ``ConvergenceError`` — never abort, panic (``PanicExce
 
 from __future__ import annotations
 
+import dataclasses
 import os
 import resource
 import signal
@@ -34,6 +35,7 @@ from hypothesis import HealthCheck, given, settings  # noqa: E402
 from hypothesis import strategies as st  # noqa: E402
 
 from socialcam import _core  # noqa: E402
+from socialcam.charges import ChargeOptions  # noqa: E402
 
 ALLOWED: tuple[type[BaseException], ...] = (
     ValueError,
@@ -122,6 +124,8 @@ EM_OPTS = dict(
     membership="window",
 )
 
+CHARGE_OPTS = dataclasses.asdict(ChargeOptions(seeds_per_ray=5, max_iter=50))
+
 
 class Opts(dict[str, Any]):
     """An options object (attribute access), fuzzed field by field."""
@@ -149,10 +153,7 @@ BASE: dict[str, tuple[list[Any], dict[str, Any]]] = {
     "null_residual": ([TRAJ, 3], {"times": TIMES}),
     "saliency_field": ([P_EYE[:4], V_EYE[:4], H_EYE[:4], QPTS], {}),
     "saliency_grid": ([P_EYE[:4], V_EYE[:4], H_EYE[:4], (-1, -1, 0), (1, 1, 2), (4, 4, 3)], {}),
-    "find_charges": (
-        [P_EYE, V_EYE, H_EYE, OFFSETS, 0],
-        {"seeds_per_ray": 5, "max_iter": 50, "min_members": 2},
-    ),
+    "find_charges": ([P_EYE, V_EYE, H_EYE, OFFSETS, 0, Opts(CHARGE_OPTS)], {}),
     "track_charges": (
         [np.eye(4)[[0, 0, 1, 1, 2]].astype(float), np.array([0, 1, 2, 3, 4], dtype=np.int64)],
         {"bandwidth": 0.3, "max_iter": 50},

@@ -44,9 +44,13 @@ def as_float_array(
 
 
 def check_seed(seed: object, name: str = "seed") -> int:
-    """Seeds are non-negative Python integers."""
-    if isinstance(seed, bool) or not isinstance(seed, (int, np.integer)) or int(seed) < 0:
-        raise ValueError(f"{name}: expected a non-negative integer, got {seed!r}")
+    """Seeds are integers in ``[0, 2⁶⁴)`` (the core's seed is a u64)."""
+    if (
+        isinstance(seed, bool)
+        or not isinstance(seed, (int, np.integer))
+        or not 0 <= int(seed) < 2**64
+    ):
+        raise ValueError(f"{name}: expected an integer in [0, 2**64), got {seed!r}")
     return int(seed)
 
 

@@ -108,9 +108,13 @@ class GazeRays:
         return {k: getattr(self, k).tolist() for k in ("p", "v", "h", "ids")}
 
 
-def _rays(rays: GazeRays | tuple[Any, ...]) -> GazeRays:
+def _rays(rays: GazeRays | tuple[Any, ...], name: str = "rays") -> GazeRays:
     if isinstance(rays, GazeRays):
         return rays
+    if not isinstance(rays, (tuple, list)) or len(rays) not in (3, 4):
+        raise ValueError(
+            f"{name}: expected a GazeRays or a tuple (p, v, h[, ids]), got {type(rays).__name__}"
+        )
     return GazeRays(*rays)
 
 

@@ -171,8 +171,9 @@ fn find_charges<'py>(
     h: PyReadonlyArray1<'py, f64>,
     offsets: PyReadonlyArray1<'py, i64>,
     seed: u64,
-    options: PyChargeOptions,
+    options: Bound<'py, PyAny>,
 ) -> PyResult<ChargeArrays<'py>> {
+    let options: PyChargeOptions = crate::convert::options(&options, "ChargeOptions")?;
     let opts = options.to_core()?;
     map(opts.validate())?;
     let (pf, n) = rows(&p, "p", 3)?;
