@@ -11,6 +11,7 @@ from socialcam import mocap, sfm, synth
 from socialcam._core import __version__
 from socialcam.articulated import (
     ArticulatedTrajectory,
+    BqpOptions,
     BqpResult,
     Skeleton,
     SkeletonReconstruction,
@@ -62,6 +63,7 @@ from socialcam.trajectory import (
 __all__ = [
     "Anomalies",
     "ArticulatedTrajectory",
+    "BqpOptions",
     "BqpResult",
     "Cameras",
     "Charge",
