@@ -164,9 +164,7 @@ def solve_bqp(
         raise ValueError(f"Q: must be square, got shape {Q_.shape}")
     c_ = None if c is None else as_float_array(c, "c", (n,))
     x, obj, bound, gap, nodes, optimal, root = _core.solve_bqp(Q_, c_, opts)
-    return BqpResult(
-        readonly(np.asarray(x, dtype=bool)), obj, bound, gap, nodes, optimal, root
-    )
+    return BqpResult(readonly(np.asarray(x, dtype=bool)), obj, bound, gap, nodes, optimal, root)
 
 
 @dataclass(frozen=True, eq=False)
