@@ -24,11 +24,11 @@ const MAX_TIME_LIMIT: f64 = 1e9;
 
 fn time_limit_of(time_limit: Option<f64>) -> PyResult<Option<Duration>> {
     match time_limit {
-        Some(t) if !(t.is_finite() && t > 0.0 && t <= MAX_TIME_LIMIT) => Err(
-            PyValueError::new_err(format!(
+        Some(t) if !(t.is_finite() && t > 0.0 && t <= MAX_TIME_LIMIT) => {
+            Err(PyValueError::new_err(format!(
                 "time_limit: expected seconds in (0, {MAX_TIME_LIMIT:e}], got {t}"
-            )),
-        ),
+            )))
+        }
         Some(t) => Ok(Some(Duration::from_secs_f64(t))),
         None => Ok(None),
     }

@@ -118,7 +118,10 @@ fn bench_beasley(c: &mut Criterion) {
             ..BqpOptions::default()
         };
         let s = solve_bqp(&p, &opts).expect("solve");
-        eprintln!("beasley n=70 parallel={parallel}: {} nodes, optimal {}", s.nodes, s.optimal);
+        eprintln!(
+            "beasley n=70 parallel={parallel}: {} nodes, optimal {}",
+            s.nodes, s.optimal
+        );
         g.bench_function(if parallel { "parallel" } else { "serial" }, |b| {
             b.iter(|| solve_bqp(&p, &opts).expect("solve"))
         });

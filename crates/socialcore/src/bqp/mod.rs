@@ -1,29 +1,36 @@
 //! Exact binary quadratic programming (thesis Sec 4.2.2, Eq 4.12).
 //!
-//! Minimise `f(b) = bᵀQb + cᵀb` over `b ∈ {0,1}ⁿ` for a symmetric `Q`, by depth-first
-//! branch-and-bound:
+//! Minimise `f(b) = bᵀQb + cᵀb` over `b ∈ {0,1}ⁿ` for a symmetric `Q`, by branch-and-bound:
 //!
-//! * **Lower bounds** come from a convex continuous relaxation over the box `[0,1]ⁿ`. Because
-//!   `b_i² = b_i` on binary points, `f(b) = bᵀ(Q + diag(s))b + (c − s)ᵀb` for every shift `s`;
-//!   we choose `s` so that `Q + diag(s)` is positive definite (this convexifies an indefinite
-//!   `Q`) and then push `s` down, coordinate by coordinate, as long as the matrix stays
-//!   positive definite and the root bound improves (an SDP-free approximation of the best
-//!   "quadratic convex reformulation" shift). Each node's box QP is solved by projected
-//!   Newton with a warm start from its parent, and the bound is the Frank–Wolfe bound
-//!   `φ(x) + Σ_i min(−g_i x_i, g_i (1 − x_i))`, valid for any feasible `x`, so an inexact
-//!   solve never yields an invalid bound.
-//! * **Variable fixing**: first-order dominance (a variable whose marginal cost has a
-//!   fixed sign whatever the other free variables do) and reduced-cost fixing from the
-//!   linearisation behind the bound.
-//! * **Branching** on the free variable maximising `min(x_i, 1 − x_i) · Qs_ii` (fractionality
-//!   weighted by curvature), depth-first, the child nearer the relaxation first.
-//! * **Incumbents**: rounding plus one-flip descent at nodes, and a deterministic one-flip
-//!   tabu search at the root.
-//! * **Limits**: a node limit and a wall-clock limit return the best incumbent with the
-//!   global bound (the smallest bound over open nodes) and the gap.
-//!
-//! The search is single-threaded and deterministic: the same input gives the same nodes
-//! and the same answer (unless the wall-clock limit interrupts it).
+//! * **Bound: quadratic convex reformulation (QCR) of the semidefinite relaxation.** Because
+//!   `b_i² = b_i` on binary points, `f(b) = bᵀ(W + diag(s))b + (h − s)ᵀb` for every shift
+//!   `s` (`W` the off-diagonal part of `Q`, `h = diag Q + c`). At the root a low-rank
+//!   first-order solve of the basic SDP relaxation ([`sdp`], the mixing method) gives the
+//!   dual multipliers, i.e. the QCR shift of Billionnet and Elloumi, repaired to positive
+//!   definiteness with the smallest eigenvalue; with it the root relaxation attains the SDP
+//!   bound. The problem's own diagonal (positive semidefinite articulated programs) is kept
+//!   when better, and a projected ascent polishes the shift ([`shift`]). Each node solves the
+//!   convex relaxation of the shifted problem over its box by projected Newton, warm-started
+//!   from its parent; the bound is the Frank–Wolfe bound `φ(x) + Σ_i min(−g_i x_i,
+//!   g_i (1 − x_i))`, valid at any feasible `x`, so an inexact solve never gives an invalid
+//!   bound.
+//! * **Variable fixing**: first-order dominance (a persistency argument: a variable whose
+//!   marginal cost has a fixed sign whatever the other free variables do) and reduced-cost
+//!   fixing from the linearisation behind the bound.
+//! * **Search**: best-first over open nodes, each expansion a depth-first dive (into the
+//!   child nearer the relaxation, up to `dive_depth` nodes, the far children left open).
+//!   Each round expands the `batch` best open nodes; with `parallel` their dives run on the
+//!   rayon pool, all against the incumbent known at the start of the round, and the round's
+//!   results are merged in a fixed order, so the answer and node count are the same on any
+//!   number of threads. Branching on the free variable maximising `min(x_i, 1 − x_i) · Qs_ii`.
+//! * **Incumbents**: rounding plus one-flip descent at every node, and a deterministic
+//!   one-flip tabu search at the root.
+//! * **Limits**: every stage (tabu, SDP sweeps, eigenvalue repair — skipped for the
+//!   Gershgorin shift when too little time is left —, Newton iterations and factorisations,
+//!   rounds) watches the wall clock and the interrupt flag ([`crate::interrupt`]). A stopped
+//!   solve returns the incumbent, a finite bound (the smallest over open nodes, never below
+//!   the trivial bound `Σ min(0, h_i) + Σ_{i≠j} min(0, W_ij)`) and the gap; Ctrl-C returns
+//!   [`Error::Interrupted`].
 
 // Index loops mirror the equations in these dense numeric kernels.
 #![allow(clippy::needless_range_loop)]
@@ -255,6 +262,9 @@ impl Clock {
     }
 }
 
+/// Below this size the rounds run on the calling thread (same results either way).
+const PARALLEL_MIN_N: usize = 64;
+
 /// Free / fixed-to-0 / fixed-to-1 state of a variable in a node.
 const FREE: i8 = -1;
 
@@ -353,7 +363,12 @@ fn dive(
             break;
         }
         out.nodes += 1;
-        let Node { mut fix, x, bound, seq } = node;
+        let Node {
+            mut fix,
+            x,
+            bound,
+            seq,
+        } = node;
         heuristic::dominance_fix(model, &mut fix);
         if fix.iter().all(|&v| v != FREE) {
             for i in 0..n {
@@ -601,7 +616,8 @@ pub fn solve_bqp(problem: &BqpProblem, options: &BqpOptions) -> Result<BqpSoluti
         let run = |(nd, solver): (Node, &mut boxqp::BoxQp)| {
             dive(&model, options, &clock, solver, nd, incumbent, depth)
         };
-        let outs: Vec<DiveOut> = if options.parallel && batch.len() > 1 {
+        // Small problems: a dive takes microseconds, less than handing it to another thread.
+        let outs: Vec<DiveOut> = if options.parallel && batch.len() > 1 && n >= PARALLEL_MIN_N {
             use rayon::prelude::*;
             batch
                 .into_par_iter()

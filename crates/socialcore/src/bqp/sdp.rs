@@ -64,7 +64,7 @@ pub(crate) fn qcr_shift(model: &Model, clock: &Clock, max_sweeps: usize, tol: f6
         row_start.push(cols.len());
     }
     let k = ((2.0 * m as f64).sqrt().ceil() as usize + 1).min(m).max(2);
-    let mut rng = ChaCha8Rng::seed_from_u64(0x5eed_b0b);
+    let mut rng = ChaCha8Rng::seed_from_u64(0x05ee_db0b);
     let mut v = vec![0.0; m * k];
     for i in 0..m {
         let r = &mut v[i * k..(i + 1) * k];

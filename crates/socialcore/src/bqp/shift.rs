@@ -16,6 +16,9 @@ use super::boxqp::{cholesky_in_place, BoxQp};
 use super::{sdp, Clock, Model, FREE};
 use faer::{Mat, Side};
 
+/// Up to this size eigenvalues are computed on one thread.
+const SMALL: usize = 200;
+
 /// Ascent steps on the shift (each costs one factorisation and one root relaxation).
 const ASCENT_STEPS: usize = 40;
 
@@ -36,9 +39,16 @@ fn root_bound(model: &Model, solver: &mut BoxQp, clock: &Clock) -> (f64, Vec<f64
     (r.bound, r.x)
 }
 
-/// Smallest eigenvalue of `W + diag(d)`; `None` if the decomposition fails.
+/// Smallest eigenvalue of `W + diag(d)`; `None` if the decomposition fails. Small
+/// matrices on one thread (nalgebra), large ones with faer.
 fn min_eigenvalue(model: &Model, d: &[f64]) -> Option<f64> {
     let n = model.n;
+    if n <= SMALL {
+        let mat =
+            nalgebra::DMatrix::from_fn(n, n, |i, j| if i == j { d[i] } else { model.w[i * n + j] });
+        let v = mat.symmetric_eigenvalues().min();
+        return v.is_finite().then_some(v);
+    }
     let mat = Mat::from_fn(n, n, |i, j| if i == j { d[i] } else { model.w[i * n + j] });
     let ev = mat.self_adjoint_eigenvalues(Side::Lower).ok()?;
     let v = ev.iter().copied().fold(f64::INFINITY, f64::min);
@@ -62,7 +72,13 @@ pub(crate) fn choose_shift(model: &mut Model, clock: &Clock) -> f64 {
 
     // Always-valid fallback: Gershgorin (W + diag(s) diagonally dominant).
     let gersh: Vec<f64> = (0..n)
-        .map(|i| model.w[i * n..(i + 1) * n].iter().map(|v| v.abs()).sum::<f64>() + margin)
+        .map(|i| {
+            model.w[i * n..(i + 1) * n]
+                .iter()
+                .map(|v| v.abs())
+                .sum::<f64>()
+                + margin
+        })
         .collect();
     set_shift(model, &gersh);
     if clock.remaining_secs() < 3.0 * eig_seconds(n) {
@@ -78,7 +94,7 @@ pub(crate) fn choose_shift(model: &mut Model, clock: &Clock) -> f64 {
     };
     let mut candidates = Vec::new();
     // Candidate A: the SDP (QCR) shift.
-    let sdp = sdp::qcr_shift(model, clock, 20 * n + 500, 1e-10);
+    let sdp = sdp::qcr_shift(model, clock, 10 * n + 200, 1e-8);
     let _ = sdp.sweeps;
     if let Some(s) = repaired(model, sdp.s) {
         candidates.push(s);

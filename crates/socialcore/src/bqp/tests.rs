@@ -258,7 +258,9 @@ fn eigenvalue_root_bound(p: &BqpProblem) -> f64 {
 #[test]
 fn sdp_root_bound_and_node_counts_beat_the_eigenvalue_shift() {
     // Beasley instances n = 40, seeds 0–2. Measured: the root bound closes 0.73, 0.88, 0.73
-    // of the gap between the eigenvalue-shift bound and the optimum, in 33, 7, 87 nodes.
+    // of the gap between the eigenvalue-shift bound and the optimum, in 33, 7, 87 nodes;
+    // with the eigenvalue shift instead (mutation run) seed 0 closes 0 and needs 133 nodes.
+    let max_nodes = [70, 20, 180];
     for seed in 0..3 {
         let p = beasley(40, 0.1, seed);
         let sol = solve_bqp(&p, &BqpOptions::default()).expect("solves");
@@ -271,8 +273,15 @@ fn sdp_root_bound_and_node_counts_beat_the_eigenvalue_shift() {
             sol.root_bound, sol.nodes
         );
         assert!(sol.root_bound <= opt + 1e-6);
-        assert!(closed >= 0.6, "root bound closes only {closed} of the eigenvalue gap");
-        assert!(sol.nodes <= 250, "{} nodes", sol.nodes);
+        assert!(
+            closed >= 0.6,
+            "root bound closes only {closed} of the eigenvalue gap"
+        );
+        assert!(
+            sol.nodes <= max_nodes[seed as usize],
+            "seed {seed}: {} nodes",
+            sol.nodes
+        );
     }
 }
 
