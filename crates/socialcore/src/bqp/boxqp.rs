@@ -137,6 +137,9 @@ impl BoxQp {
                 for a in 0..r {
                     self.d[self.inactive[a]] = self.rhs[a];
                 }
+            } else if clock.out() {
+                // The factorisation gave up on the clock: stop with the bound we have.
+                break;
             } else {
                 for &k in &self.inactive {
                     self.d[k] = -self.g[k];
