@@ -35,6 +35,7 @@ from hypothesis import HealthCheck, given, settings  # noqa: E402
 from hypothesis import strategies as st  # noqa: E402
 
 from socialcam import _core  # noqa: E402
+from socialcam.articulated import BqpOptions  # noqa: E402
 from socialcam.charges import ChargeOptions  # noqa: E402
 
 ALLOWED: tuple[type[BaseException], ...] = (
@@ -125,6 +126,7 @@ EM_OPTS = dict(
 )
 
 CHARGE_OPTS = dataclasses.asdict(ChargeOptions(seeds_per_ray=5, max_iter=50))
+BQP_OPTS = dataclasses.asdict(BqpOptions(time_limit=5.0, node_limit=1000))
 
 
 class Opts(dict[str, Any]):
@@ -164,7 +166,7 @@ BASE: dict[str, tuple[list[Any], dict[str, Any]]] = {
     "gaze_predict": ([POS, MAG, KAPPA, FRAME, QPTS], {}),
     "gaze_log_density": ([POS, MAG, KAPPA, FRAME, QPTS, V_EYE[:2]], {}),
     "gaze_angle_to_charges": ([POS, MAG, KAPPA, FRAME, QPTS, V_EYE[:2], 0.3], {}),
-    "solve_bqp": ([Q], {"c": np.ones(3), "time_limit": 5.0, "node_limit": 1000}),
+    "solve_bqp": ([Q, np.ones(3), Opts(BQP_OPTS)], {}),
     "reconstruct_articulated": (
         [K, R, C, PIX_CHILD, PARENT, TIMES, 0.4, 3],
         {"refine": True, "time_limit": 5.0, "node_limit": 10_000, "fit_radius": False},

@@ -237,9 +237,7 @@ def _probe_result(name: str) -> list[str]:
 
 
 #: Functions known to fail the probe, with the reason (strict: a fix shows as XPASS).
-KNOWN_BAD: dict[str, str] = {
-    "solve_bqp": "time_limit/node_limit validation belongs to the BQP rewrite (issue 12)",
-}
+KNOWN_BAD: dict[str, str] = {}
 
 
 @pytest.mark.parametrize(

@@ -22,7 +22,6 @@ EXAMPLES = 120
 
 # Functions that still crash, each with its owner's reason; strict, so fixing it shows.
 KNOWN_CRASHES: dict[str, str] = {
-    "solve_bqp": "i12-bqp: time_limit=1e20/inf panics (Duration::from_secs_f64)",
     "reconstruct_skeleton": "i12-bqp/i12-artic: time_limit=1e20/inf panics (Duration)",
 }
 

@@ -12,6 +12,7 @@ from socialcam import mocap, sfm, synth
 from socialcam._core import __version__
 from socialcam.articulated import (
     ArticulatedTrajectory,
+    BqpOptions,
     BqpResult,
     Skeleton,
     SkeletonReconstruction,
@@ -67,6 +68,7 @@ from socialcam.trajectory import (
 __all__ = [
     "Anomalies",
     "ArticulatedTrajectory",
+    "BqpOptions",
     "BqpResult",
     "Cameras",
     "Charge",

@@ -219,10 +219,10 @@ def gaze_angle_to_charges(
 # --- binary quadratic programming and articulated motion (Chapter 4) ---
 
 def solve_bqp(
-    q: _F64, c: _F64 | None = None, time_limit: float | None = None, node_limit: int | None = None
-) -> tuple[npt.NDArray[np.bool_], float, float, float, int, bool]:
-    """Exact ``min bᵀQb + cᵀb`` over ``{0,1}ⁿ``: ``(x (n,), objective, bound, gap, nodes,
-    optimal)``."""
+    q: _F64, c: _F64 | None, options: Any
+) -> tuple[npt.NDArray[np.bool_], float, float, float, int, bool, float]:
+    """Exact ``min bᵀQb + cᵀb`` over ``{0,1}ⁿ`` with a ``socialcam.BqpOptions``:
+    ``(x (n,), objective, bound, gap, nodes, optimal, root_bound)``."""
 
 def reconstruct_articulated(
     k_mat: _F64,

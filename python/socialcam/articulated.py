@@ -11,18 +11,19 @@ the root outwards (Eq 4.6).
 from __future__ import annotations
 
 from collections.abc import Sequence
-from dataclasses import dataclass, field
+from dataclasses import dataclass, field, fields, replace
 from typing import Any
 
 import numpy as np
 import numpy.typing as npt
 
 from socialcam import _core
-from socialcam._validate import FloatArray, as_float_array, check_int
+from socialcam._validate import FloatArray, as_float_array, check_float, check_int, readonly
 from socialcam.camera import Cameras
 
 __all__ = [
     "ArticulatedTrajectory",
+    "BqpOptions",
     "BqpResult",
     "Skeleton",
     "SkeletonReconstruction",
@@ -39,18 +40,64 @@ __all__ = [
 DEFAULT_NODE_LIMIT = 100_000
 
 
+#: Longest accepted ``time_limit`` in seconds (about 31 years).
+MAX_TIME_LIMIT = 1e9
+
+
+@dataclass(frozen=True)
+class BqpOptions:
+    """Limits and search settings of :func:`solve_bqp`.
+
+    Attributes
+    ----------
+    time_limit : seconds of wall clock for the whole solve (root work included), in
+        ``(0, 1e9]``, or None for no limit. On expiry the best incumbent is returned with a
+        finite ``bound`` and ``optimal=False``.
+    node_limit : maximum number of branch-and-bound nodes (≥ 0), or None.
+    parallel : run the dives of each round of the tree search on all cores (rayon). The
+        rounds are merged in a fixed order, so the answer and the node count are the same
+        with one thread or many.
+    batch : open nodes expanded per round (best bounds first), each starting a dive, ≥ 1.
+    dive_depth : nodes per dive (a node, then its nearer child, …), ≥ 1.
+    """
+
+    time_limit: float | None = None
+    node_limit: int | None = None
+    parallel: bool = True
+    batch: int = 4
+    dive_depth: int = 16
+
+    def __post_init__(self) -> None:
+        if self.time_limit is not None:
+            t = check_float(
+                self.time_limit, "time_limit", min=0.0, min_exclusive=True, max=MAX_TIME_LIMIT
+            )
+            object.__setattr__(self, "time_limit", t)
+        if self.node_limit is not None:
+            object.__setattr__(self, "node_limit", check_int(self.node_limit, "node_limit", min=0))
+        if not isinstance(self.parallel, (bool, np.bool_)):
+            raise ValueError(f"parallel: expected a bool, got {self.parallel!r}")
+        object.__setattr__(self, "parallel", bool(self.parallel))
+        object.__setattr__(self, "batch", check_int(self.batch, "batch", min=1, max=1 << 20))
+        object.__setattr__(
+            self, "dive_depth", check_int(self.dive_depth, "dive_depth", min=1, max=1 << 20)
+        )
+
+
 @dataclass(frozen=True, eq=False)
 class BqpResult:
     """Outcome of :func:`solve_bqp`.
 
     Attributes
     ----------
-    x : (n,) bool, the best binary point found.
+    x : (n,) bool, read-only, the best binary point found.
     objective : ``xᵀQx + cᵀx``.
-    bound : proven lower bound on the minimum (equals ``objective`` when optimal).
+    bound : proven lower bound on the minimum (equals ``objective`` when optimal; always
+        finite, also when a limit stopped the solve).
     gap : relative gap ``(objective − bound) / max(|objective|, |bound|)``.
     nodes : branch-and-bound nodes processed.
     optimal : whether optimality was proven (no limit was hit).
+    root_bound : bound proven at the root before branching (the semidefinite/QCR bound).
     """
 
     x: npt.NDArray[np.bool_]
@@ -59,6 +106,7 @@ class BqpResult:
     gap: float
     nodes: int
     optimal: bool
+    root_bound: float = float("nan")
 
     def to_dict(self) -> dict[str, Any]:
         return {
@@ -68,39 +116,55 @@ class BqpResult:
             "gap": self.gap,
             "nodes": self.nodes,
             "optimal": self.optimal,
+            "root_bound": self.root_bound,
         }
 
 
 def solve_bqp(
     Q: npt.ArrayLike,
     c: npt.ArrayLike | None = None,
-    time_limit: float | None = None,
-    node_limit: int | None = None,
+    *,
+    options: BqpOptions | None = None,
+    **overrides: Any,
 ) -> BqpResult:
-    """Minimise ``bᵀQb + cᵀb`` over ``b ∈ {0,1}ⁿ`` exactly (branch-and-bound).
+    """Minimise ``bᵀQb + cᵀb`` over ``b ∈ {0,1}ⁿ`` exactly (branch-and-bound, Eq 4.12).
+
+    The bound is the quadratic convex reformulation of the semidefinite relaxation (a
+    diagonal shift ``b_i² = b_i`` that makes the problem convex, chosen by a low-rank SDP
+    solve at the root); every node solves its box-constrained convex relaxation. A
+    maximisation ``max bᵀSb`` (Beasley's OR-Library convention) is ``Q = −S``.
 
     Parameters
     ----------
-    Q : (n, n) symmetric float array (any sign pattern: indefinite matrices are convexified
-        with a diagonal shift using ``b_i² = b_i``).
+    Q : (n, n) symmetric float array, any sign pattern.
     c : (n,) linear term, zero when omitted.
-    time_limit : seconds; on expiry the best incumbent is returned with ``optimal=False``.
-    node_limit : maximum number of branch-and-bound nodes.
+    options : :class:`BqpOptions`; ``overrides`` are its field names (e.g.
+        ``time_limit=1.0``) applied on top.
 
     Raises
     ------
     ValueError
-        ``Q`` not square, not symmetric, or not finite; ``c`` of the wrong length.
+        ``Q`` not square, not symmetric, or not finite; ``c`` of the wrong length; a bad
+        option (the message names it), or an unknown option name.
+    KeyboardInterrupt
+        Ctrl-C during the solve (it stops within a fraction of a second).
     """
+    opts = options if options is not None else BqpOptions()
+    if not isinstance(opts, BqpOptions):
+        raise ValueError(f"options: expected a BqpOptions, got {type(opts).__name__}")
+    if overrides:
+        known = {f.name for f in fields(BqpOptions)}
+        for name in overrides:
+            if name not in known:
+                raise ValueError(f"{name}: not an option of solve_bqp ({', '.join(sorted(known))})")
+        opts = replace(opts, **overrides)
     Q_ = as_float_array(Q, "Q", (None, None))
     n = Q_.shape[0]
     if Q_.shape[1] != n:
         raise ValueError(f"Q: must be square, got shape {Q_.shape}")
     c_ = None if c is None else as_float_array(c, "c", (n,))
-    if node_limit is not None and node_limit < 0:
-        raise ValueError(f"node_limit: must be non-negative, got {node_limit}")
-    x, obj, bound, gap, nodes, optimal = _core.solve_bqp(Q_, c_, time_limit, node_limit)
-    return BqpResult(np.asarray(x, dtype=bool), obj, bound, gap, nodes, optimal)
+    x, obj, bound, gap, nodes, optimal, root = _core.solve_bqp(Q_, c_, opts)
+    return BqpResult(readonly(np.asarray(x, dtype=bool)), obj, bound, gap, nodes, optimal, root)
 
 
 @dataclass(frozen=True, eq=False)

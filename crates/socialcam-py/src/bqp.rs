@@ -19,24 +19,67 @@ use std::time::Duration;
 use crate::convert::{cameras, rows, vec1};
 use crate::errors::{detach, map};
 
-fn bqp_options(time_limit: Option<f64>, node_limit: Option<u64>) -> PyResult<BqpOptions> {
-    let time_limit = match time_limit {
-        Some(t) if !(t.is_finite() && t > 0.0) => {
-            return Err(PyValueError::new_err(format!(
-                "time_limit: must be positive and finite, got {t}"
+/// Longest accepted `time_limit`, seconds (about 31 years): beyond it `Duration` overflows.
+const MAX_TIME_LIMIT: f64 = 1e9;
+
+fn time_limit_of(time_limit: Option<f64>) -> PyResult<Option<Duration>> {
+    match time_limit {
+        Some(t) if !(t.is_finite() && t > 0.0 && t <= MAX_TIME_LIMIT) => {
+            Err(PyValueError::new_err(format!(
+                "time_limit: expected seconds in (0, {MAX_TIME_LIMIT:e}], got {t}"
             )))
         }
-        Some(t) => Some(Duration::from_secs_f64(t)),
-        None => None,
-    };
+        Some(t) => Ok(Some(Duration::from_secs_f64(t))),
+        None => Ok(None),
+    }
+}
+
+fn bqp_options(time_limit: Option<f64>, node_limit: Option<u64>) -> PyResult<BqpOptions> {
     Ok(BqpOptions {
-        time_limit,
+        time_limit: time_limit_of(time_limit)?,
         node_limit,
         ..BqpOptions::default()
     })
 }
 
-type SolutionTuple<'py> = (Bound<'py, PyArray1<bool>>, f64, f64, f64, u64, bool);
+/// The fields of the Python `socialcam.BqpOptions` dataclass (validated there; checked
+/// again here so that no input reaches the core unchecked).
+#[derive(FromPyObject)]
+struct PyBqpOptions {
+    #[pyo3(attribute)]
+    time_limit: Option<f64>,
+    #[pyo3(attribute)]
+    node_limit: Option<u64>,
+    #[pyo3(attribute)]
+    parallel: bool,
+    #[pyo3(attribute)]
+    batch: usize,
+    #[pyo3(attribute)]
+    dive_depth: usize,
+}
+
+impl PyBqpOptions {
+    fn core(&self) -> PyResult<BqpOptions> {
+        for (name, v) in [("batch", self.batch), ("dive_depth", self.dive_depth)] {
+            if v == 0 || v > 1 << 20 {
+                return Err(PyValueError::new_err(format!(
+                    "{name}: expected an integer in [1, {}], got {v}",
+                    1 << 20
+                )));
+            }
+        }
+        Ok(BqpOptions {
+            time_limit: time_limit_of(self.time_limit)?,
+            node_limit: self.node_limit,
+            parallel: self.parallel,
+            batch: self.batch,
+            dive_depth: self.dive_depth,
+            ..BqpOptions::default()
+        })
+    }
+}
+
+type SolutionTuple<'py> = (Bound<'py, PyArray1<bool>>, f64, f64, f64, u64, bool, f64);
 
 fn solution<'py>(py: Python<'py>, s: BqpSolution) -> SolutionTuple<'py> {
     (
@@ -46,19 +89,21 @@ fn solution<'py>(py: Python<'py>, s: BqpSolution) -> SolutionTuple<'py> {
         s.gap,
         s.nodes,
         s.optimal,
+        s.root_bound,
     )
 }
 
-/// Exact `min bᵀQb + cᵀb` over `b ∈ {0,1}ⁿ`: `(x, objective, bound, gap, nodes, optimal)`.
+/// Exact `min bᵀQb + cᵀb` over `b ∈ {0,1}ⁿ`:
+/// `(x, objective, bound, gap, nodes, optimal, root_bound)`.
 #[pyfunction]
-#[pyo3(signature = (q, c=None, time_limit=None, node_limit=None))]
+#[pyo3(signature = (q, c, options))]
 fn solve_bqp<'py>(
     py: Python<'py>,
     q: PyReadonlyArray2<'py, f64>,
     c: Option<PyReadonlyArray1<'py, f64>>,
-    time_limit: Option<f64>,
-    node_limit: Option<u64>,
+    options: Bound<'py, PyAny>,
 ) -> PyResult<SolutionTuple<'py>> {
+    let options: PyBqpOptions = crate::convert::options(&options, "BqpOptions")?;
     let qv = q.as_array();
     let n = qv.nrows();
     if qv.ncols() != n {
@@ -73,7 +118,7 @@ fn solve_bqp<'py>(
         Some(c) => vec1(c),
         None => vec![0.0; n],
     };
-    let opts = bqp_options(time_limit, node_limit)?;
+    let opts = options.core()?;
     let problem = map(BqpProblem::from_row_major(n, qf, cf))?;
     let s = detach(py, || core_solve(&problem, &opts))?;
     Ok(solution(py, s))

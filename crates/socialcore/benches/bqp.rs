@@ -1,6 +1,8 @@
 //! One exact BQP solve with n = 40 built from an articulated reconstruction (Eq 4.12):
 //! a stationary camera, a moving parent, a child on a smooth path, 1 px pixel noise.
-//! Plus the OR-Library instance bqp50-1 from `tests/data/bqp`.
+//! Plus the OR-Library instance bqp50-1 from `tests/data/bqp`, and a Beasley-style random
+//! instance with n = 70 (10 % density, integers in [−100, 100], minimising `−xᵀSx`) solved
+//! with the parallel rounds and on one thread.
 use criterion::{criterion_group, criterion_main, Criterion};
 use nalgebra::{DMatrix, DVector, Matrix3, Vector2, Vector3};
 use rand::{Rng, SeedableRng};
@@ -91,5 +93,41 @@ fn bench(c: &mut Criterion) {
     });
 }
 
-criterion_group!(benches, bench);
+fn beasley(n: usize, seed: u64) -> BqpProblem {
+    let mut rng = ChaCha8Rng::seed_from_u64(seed);
+    let mut q = vec![0.0; n * n];
+    for i in 0..n {
+        for j in i..n {
+            if rng.random_bool(0.1) {
+                let v = -f64::from(rng.random_range(-100i32..=100));
+                q[i * n + j] = v;
+                q[j * n + i] = v;
+            }
+        }
+    }
+    BqpProblem::from_row_major(n, q, vec![0.0; n]).expect("valid")
+}
+
+fn bench_beasley(c: &mut Criterion) {
+    let p = beasley(70, 0);
+    let mut g = c.benchmark_group("bqp_beasley_n70");
+    g.sample_size(10);
+    for parallel in [true, false] {
+        let opts = BqpOptions {
+            parallel,
+            ..BqpOptions::default()
+        };
+        let s = solve_bqp(&p, &opts).expect("solve");
+        eprintln!(
+            "beasley n=70 parallel={parallel}: {} nodes, optimal {}",
+            s.nodes, s.optimal
+        );
+        g.bench_function(if parallel { "parallel" } else { "serial" }, |b| {
+            b.iter(|| solve_bqp(&p, &opts).expect("solve"))
+        });
+    }
+    g.finish();
+}
+
+criterion_group!(benches, bench, bench_beasley);
 criterion_main!(benches);

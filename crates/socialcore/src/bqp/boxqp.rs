@@ -3,7 +3,7 @@
 //! coordinates, warm-started; the returned bound is the Frank–Wolfe bound, valid at any
 //! feasible point because `φ` is convex.
 
-use super::{Model, FREE};
+use super::{Clock, Model, FREE};
 
 pub(crate) struct Relaxation {
     /// Minimiser estimate over all `n` coordinates (fixed ones at their values).
@@ -50,8 +50,16 @@ impl BoxQp {
     }
 
     /// Solves the relaxation of the node `fix` starting from `x0`; stops early once the
-    /// bound reaches `cut` (the node will be pruned anyway).
-    pub fn solve(&mut self, model: &Model, fix: &[i8], x0: &[f64], cut: f64) -> Relaxation {
+    /// bound reaches `cut` (the node will be pruned anyway) or the clock runs out (the
+    /// bound is valid at whatever point it stopped).
+    pub fn solve(
+        &mut self,
+        model: &Model,
+        fix: &[i8],
+        x0: &[f64],
+        cut: f64,
+        clock: &Clock,
+    ) -> Relaxation {
         let n = model.n;
         self.free.clear();
         self.free.extend((0..n).filter(|&i| fix[i] == FREE));
@@ -102,7 +110,7 @@ impl BoxQp {
                 converged = true;
                 break;
             }
-            if best_bound >= cut {
+            if best_bound >= cut || clock.out() {
                 break;
             }
             // Inactive set: coordinates that may move.
@@ -124,11 +132,14 @@ impl BoxQp {
                 self.rhs[a] = -self.g[ia];
             }
             self.d[..m].fill(0.0);
-            let newton_ok = cholesky_solve(&mut self.chol, r, &mut self.rhs);
+            let newton_ok = cholesky_solve(&mut self.chol, r, &mut self.rhs, Some(clock));
             if newton_ok {
                 for a in 0..r {
                     self.d[self.inactive[a]] = self.rhs[a];
                 }
+            } else if clock.out() {
+                // The factorisation gave up on the clock: stop with the bound we have.
+                break;
             } else {
                 for &k in &self.inactive {
                     self.d[k] = -self.g[k];
@@ -226,8 +237,14 @@ fn quad_value(a: &[f64], p: &[f64], y: &[f64], m: usize, constant: f64) -> f64 {
 
 /// In-place Cholesky of the lower triangle of the row-major `r × r` matrix in `l`, then
 /// solves `L Lᵀ z = rhs` into `rhs`. Returns false if a pivot is not positive.
-pub(crate) fn cholesky_solve(l: &mut [f64], r: usize, rhs: &mut [f64]) -> bool {
-    if !cholesky_in_place(l, r) {
+/// Gives up (false) if `clock` runs out during the factorisation.
+pub(crate) fn cholesky_solve(
+    l: &mut [f64],
+    r: usize,
+    rhs: &mut [f64],
+    clock: Option<&Clock>,
+) -> bool {
+    if !cholesky_in_place(l, r, clock) {
         return false;
     }
     for i in 0..r {
@@ -247,9 +264,13 @@ pub(crate) fn cholesky_solve(l: &mut [f64], r: usize, rhs: &mut [f64]) -> bool {
     true
 }
 
-/// Lower Cholesky factor in place (row-major, lower triangle read and written).
-pub(crate) fn cholesky_in_place(l: &mut [f64], r: usize) -> bool {
+/// Lower Cholesky factor in place (row-major, lower triangle read and written). False if a
+/// pivot is not positive or `clock` runs out (checked every 32 rows).
+pub(crate) fn cholesky_in_place(l: &mut [f64], r: usize, clock: Option<&Clock>) -> bool {
     for i in 0..r {
+        if i % 32 == 31 && clock.is_some_and(Clock::out) {
+            return false;
+        }
         for j in 0..=i {
             let (ri, rj) = (i * r, j * r);
             let mut s = l[ri + j];

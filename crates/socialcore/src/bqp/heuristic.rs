@@ -1,7 +1,7 @@
 //! Primal heuristics and dominance fixing on the original objective
 //! `f(b) = Σ h_i b_i + Σ_{i≠j} W_ij b_i b_j`.
 
-use super::{Model, FREE};
+use super::{Clock, Model, FREE};
 
 /// `field_i = h_i + 2 Σ_j W_ij b_j`: flipping `b_i` changes `f` by `±field_i`.
 fn fields(model: &Model, b: &[bool]) -> Vec<f64> {
@@ -56,7 +56,13 @@ pub(crate) fn one_flip_descent(model: &Model, b: &mut [bool]) {
 
 /// Deterministic one-flip tabu search (best admissible move each step, aspiration when a
 /// tabu move beats the best value found); returns the best point visited.
-pub(crate) fn tabu_search(model: &Model, start: &[bool], iterations: usize) -> Vec<bool> {
+/// Stops early when `clock` runs out.
+pub(crate) fn tabu_search(
+    model: &Model,
+    start: &[bool],
+    iterations: usize,
+    clock: &Clock,
+) -> Vec<bool> {
     let n = model.n;
     let mut b = start.to_vec();
     let mut field = fields(model, &b);
@@ -66,6 +72,9 @@ pub(crate) fn tabu_search(model: &Model, start: &[bool], iterations: usize) -> V
     let tenure = (n / 4).clamp(1, 20);
     let mut tabu_until = vec![0usize; n];
     for it in 1..=iterations {
+        if it % 64 == 0 && clock.out() {
+            break;
+        }
         let mut pick = usize::MAX;
         let mut pick_d = f64::INFINITY;
         for i in 0..n {

@@ -1,35 +1,43 @@
 //! Exact binary quadratic programming (thesis Sec 4.2.2, Eq 4.12).
 //!
-//! Minimise `f(b) = bᵀQb + cᵀb` over `b ∈ {0,1}ⁿ` for a symmetric `Q`, by depth-first
-//! branch-and-bound:
+//! Minimise `f(b) = bᵀQb + cᵀb` over `b ∈ {0,1}ⁿ` for a symmetric `Q`, by branch-and-bound:
 //!
-//! * **Lower bounds** come from a convex continuous relaxation over the box `[0,1]ⁿ`. Because
-//!   `b_i² = b_i` on binary points, `f(b) = bᵀ(Q + diag(s))b + (c − s)ᵀb` for every shift `s`;
-//!   we choose `s` so that `Q + diag(s)` is positive definite (this convexifies an indefinite
-//!   `Q`) and then push `s` down, coordinate by coordinate, as long as the matrix stays
-//!   positive definite and the root bound improves (an SDP-free approximation of the best
-//!   "quadratic convex reformulation" shift). Each node's box QP is solved by projected
-//!   Newton with a warm start from its parent, and the bound is the Frank–Wolfe bound
-//!   `φ(x) + Σ_i min(−g_i x_i, g_i (1 − x_i))`, valid for any feasible `x`, so an inexact
-//!   solve never yields an invalid bound.
-//! * **Variable fixing**: first-order dominance (a variable whose marginal cost has a
-//!   fixed sign whatever the other free variables do) and reduced-cost fixing from the
-//!   linearisation behind the bound.
-//! * **Branching** on the free variable maximising `min(x_i, 1 − x_i) · Qs_ii` (fractionality
-//!   weighted by curvature), depth-first, the child nearer the relaxation first.
-//! * **Incumbents**: rounding plus one-flip descent at nodes, and a deterministic one-flip
-//!   tabu search at the root.
-//! * **Limits**: a node limit and a wall-clock limit return the best incumbent with the
-//!   global bound (the smallest bound over open nodes) and the gap.
-//!
-//! The search is single-threaded and deterministic: the same input gives the same nodes
-//! and the same answer (unless the wall-clock limit interrupts it).
+//! * **Bound: quadratic convex reformulation (QCR) of the semidefinite relaxation.** Because
+//!   `b_i² = b_i` on binary points, `f(b) = bᵀ(W + diag(s))b + (h − s)ᵀb` for every shift
+//!   `s` (`W` the off-diagonal part of `Q`, `h = diag Q + c`). At the root a low-rank
+//!   first-order solve of the basic SDP relaxation ([`sdp`], the mixing method) gives the
+//!   dual multipliers, i.e. the QCR shift of Billionnet and Elloumi, repaired to positive
+//!   definiteness with the smallest eigenvalue; with it the root relaxation attains the SDP
+//!   bound. The problem's own diagonal (positive semidefinite articulated programs) is kept
+//!   when better, and a projected ascent polishes the shift ([`shift`]). Each node solves the
+//!   convex relaxation of the shifted problem over its box by projected Newton, warm-started
+//!   from its parent; the bound is the Frank–Wolfe bound `φ(x) + Σ_i min(−g_i x_i,
+//!   g_i (1 − x_i))`, valid at any feasible `x`, so an inexact solve never gives an invalid
+//!   bound.
+//! * **Variable fixing**: first-order dominance (a persistency argument: a variable whose
+//!   marginal cost has a fixed sign whatever the other free variables do) and reduced-cost
+//!   fixing from the linearisation behind the bound.
+//! * **Search**: best-first over open nodes, each expansion a depth-first dive (into the
+//!   child nearer the relaxation, up to `dive_depth` nodes, the far children left open).
+//!   Each round expands the `batch` best open nodes; with `parallel` their dives run on the
+//!   rayon pool, all against the incumbent known at the start of the round, and the round's
+//!   results are merged in a fixed order, so the answer and node count are the same on any
+//!   number of threads. Branching on the free variable maximising `min(x_i, 1 − x_i) · Qs_ii`.
+//! * **Incumbents**: rounding plus one-flip descent at every node, and a deterministic
+//!   one-flip tabu search at the root.
+//! * **Limits**: every stage (tabu, SDP sweeps, eigenvalue repair — skipped for the
+//!   Gershgorin shift when too little time is left —, Newton iterations and factorisations,
+//!   rounds) watches the wall clock and the interrupt flag ([`crate::interrupt`]). A stopped
+//!   solve returns the incumbent, a finite bound (the smallest over open nodes, never below
+//!   the trivial bound `Σ min(0, h_i) + Σ_{i≠j} min(0, W_ij)`) and the gap; Ctrl-C returns
+//!   [`Error::Interrupted`].
 
 // Index loops mirror the equations in these dense numeric kernels.
 #![allow(clippy::needless_range_loop)]
 
 mod boxqp;
 mod heuristic;
+mod sdp;
 mod shift;
 
 use crate::error::{Error, Result};
@@ -146,6 +154,13 @@ pub struct BqpOptions {
     pub abs_tol: f64,
     /// See `abs_tol`.
     pub rel_tol: f64,
+    /// Open nodes expanded per round (best bounds first); each starts a dive.
+    pub batch: usize,
+    /// Nodes per dive (a node and then its nearer child, and so on).
+    pub dive_depth: usize,
+    /// Run the dives of a round on the rayon pool. The rounds are merged in a fixed order,
+    /// so the answer and the node count do not depend on the number of threads.
+    pub parallel: bool,
 }
 
 impl Default for BqpOptions {
@@ -155,6 +170,9 @@ impl Default for BqpOptions {
             node_limit: None,
             abs_tol: 1e-12,
             rel_tol: 1e-9,
+            batch: 4,
+            dive_depth: 16,
+            parallel: true,
         }
     }
 }
@@ -174,6 +192,9 @@ pub struct BqpSolution {
     pub nodes: u64,
     /// Whether the search finished, proving `x` optimal (within the tolerances).
     pub optimal: bool,
+    /// Bound proven at the root, before branching (the QCR/SDP bound; the trivial bound
+    /// `Σ min(0, ·)` if the clock stopped the root work).
+    pub root_bound: f64,
 }
 
 /// Internal form: `f(b) = Σ h_i b_i + Σ_{i≠j} W_ij b_i b_j` and its convex reformulation
@@ -213,159 +234,188 @@ impl Model {
     }
 }
 
+/// Wall clock and interrupt flag shared by every stage of a solve.
+pub(crate) struct Clock {
+    start: Instant,
+    limit: Option<Duration>,
+}
+
+impl Clock {
+    fn new(limit: Option<Duration>) -> Self {
+        Clock {
+            start: Instant::now(),
+            limit,
+        }
+    }
+
+    /// The time limit has passed or the user asked to stop (Ctrl-C).
+    pub(crate) fn out(&self) -> bool {
+        crate::interrupt::requested() || self.limit.is_some_and(|t| self.start.elapsed() >= t)
+    }
+
+    /// Seconds left before the limit (`∞` without one).
+    pub(crate) fn remaining_secs(&self) -> f64 {
+        match self.limit {
+            None => f64::INFINITY,
+            Some(t) => (t.as_secs_f64() - self.start.elapsed().as_secs_f64()).max(0.0),
+        }
+    }
+}
+
+/// Below this size the rounds run on the calling thread (same results either way).
+const PARALLEL_MIN_N: usize = 64;
+
 /// Free / fixed-to-0 / fixed-to-1 state of a variable in a node.
 const FREE: i8 = -1;
 
+#[derive(Clone)]
 struct Node {
     fix: Vec<i8>,
     /// Warm start for the relaxation (length `n`, fixed entries equal their values).
     x: Vec<f64>,
+    /// Valid lower bound of the node (from its parent until processed).
     bound: f64,
+    /// Creation number, for a deterministic order among equal bounds.
+    seq: u64,
 }
 
-/// Solves `min bᵀQb + cᵀb` over `b ∈ {0,1}ⁿ` exactly by branch-and-bound (see the module
-/// docs), or up to the limits in `options`.
-pub fn solve_bqp(problem: &BqpProblem, options: &BqpOptions) -> Result<BqpSolution> {
-    if let Some(t) = options.time_limit {
-        if t.is_zero() {
-            return Err(Error::invalid("time_limit", "must be positive"));
-        }
+/// Open nodes ordered best (smallest) bound first.
+struct Open(Node);
+
+impl PartialEq for Open {
+    fn eq(&self, o: &Self) -> bool {
+        self.cmp(o) == std::cmp::Ordering::Equal
     }
-    if !(options.abs_tol >= 0.0 && options.rel_tol >= 0.0) {
-        return Err(Error::invalid("abs_tol/rel_tol", "must be non-negative"));
+}
+impl Eq for Open {}
+impl PartialOrd for Open {
+    fn partial_cmp(&self, o: &Self) -> Option<std::cmp::Ordering> {
+        Some(self.cmp(o))
     }
-    let start = Instant::now();
-    let n = problem.n;
-    if n == 0 {
-        return Ok(BqpSolution {
-            x: vec![],
-            objective: 0.0,
-            bound: 0.0,
-            gap: 0.0,
-            nodes: 0,
-            optimal: true,
-        });
+}
+impl Ord for Open {
+    fn cmp(&self, o: &Self) -> std::cmp::Ordering {
+        // BinaryHeap is a max-heap: reverse on the bound, then on the creation number.
+        o.0.bound
+            .total_cmp(&self.0.bound)
+            .then_with(|| o.0.seq.cmp(&self.0.seq))
     }
-    let mut w = problem.q.clone();
-    let mut h = problem.c.clone();
-    let qdiag: Vec<f64> = (0..n).map(|i| w[i * n + i]).collect();
-    for i in 0..n {
-        h[i] += w[i * n + i];
-        w[i * n + i] = 0.0;
+}
+
+/// The trivial bound `Σ min(0, h_i) + Σ_{i≠j} min(0, W_ij)`: finite, needs no work beyond
+/// reading the coefficients, and is reported if the clock stops the solve before the root.
+fn trivial_bound(model: &Model) -> f64 {
+    let neg = |v: &f64| v.min(0.0);
+    model.h.iter().map(neg).sum::<f64>() + model.w.iter().map(neg).sum::<f64>()
+}
+
+/// What one dive from a node produced.
+struct DiveOut {
+    /// Nodes left open (the far children along the dive, and the last node if the dive was
+    /// cut short), with their bounds.
+    open: Vec<Node>,
+    /// Best binary point found in the dive.
+    best: Option<(f64, Vec<bool>)>,
+    nodes: u64,
+}
+
+/// Pruning threshold for an incumbent value `u`.
+fn cutoff(model: &Model, options: &BqpOptions, u: f64) -> f64 {
+    if model.integral {
+        u - 1.0 + 1e-6 * u.abs().max(1.0)
+    } else {
+        u - options.abs_tol.max(options.rel_tol * u.abs())
     }
-    let is_int = |v: f64| (v - v.round()).abs() <= 1e-12 * v.abs().max(1.0);
-    let integral = h.iter().all(|&v| is_int(v)) && w.iter().all(|&v| is_int(2.0 * v));
-    let mut model = Model {
-        n,
-        qs: w.clone(),
-        lin: h.clone(),
-        w,
-        h,
-        qdiag,
-        integral,
+}
+
+/// Processes `node`, then keeps diving into its nearer child for at most `max_depth`
+/// nodes; the incumbent value it prunes against starts at `best_f` and improves with what
+/// the dive finds.
+fn dive(
+    model: &Model,
+    options: &BqpOptions,
+    clock: &Clock,
+    solver: &mut boxqp::BoxQp,
+    node: Node,
+    mut best_f: f64,
+    max_depth: usize,
+) -> DiveOut {
+    let n = model.n;
+    let mut out = DiveOut {
+        open: Vec::new(),
+        best: None,
+        nodes: 0,
     };
-
-    // Incumbent from the root: tabu search from zero (deterministic).
-    let mut best_x = vec![false; n];
-    let mut best_f = model.f(&best_x);
-    let tabu = heuristic::tabu_search(&model, &best_x, 20 * n + 200);
-    let tf = model.f(&tabu);
-    if tf < best_f {
-        best_f = tf;
-        best_x = tabu;
-    }
-
-    // Convexifying shift, tuned on the root relaxation.
-    shift::choose_shift(&mut model)?;
-
-    let mut solver = boxqp::BoxQp::new(n);
-    let mut stack = vec![Node {
-        fix: vec![FREE; n],
-        x: vec![0.5; n],
-        bound: f64::NEG_INFINITY,
-    }];
-    let mut nodes: u64 = 0;
-    let cutoff = |u: f64| -> f64 {
-        if model.integral {
-            u - 1.0 + 1e-6 * u.abs().max(1.0)
-        } else {
-            u - options.abs_tol.max(options.rel_tol * u.abs())
-        }
-    };
-    let mut interrupted = false;
     let mut scratch_b = vec![false; n];
-    while let Some(node) = stack.pop() {
-        if node.bound >= cutoff(best_f) {
-            continue;
+    let mut current = Some(node);
+    let offer = |f: f64, b: &[bool], best_f: &mut f64, out: &mut DiveOut| {
+        if f < *best_f {
+            *best_f = f;
+            out.best = Some((f, b.to_vec()));
         }
-        let over_nodes = options.node_limit.is_some_and(|m| nodes >= m);
-        let over_time = options
-            .time_limit
-            .is_some_and(|t| nodes % 16 == 0 && start.elapsed() >= t);
-        if over_nodes || over_time {
-            stack.push(node);
-            interrupted = true;
+    };
+    while let Some(node) = current.take() {
+        if node.bound >= cutoff(model, options, best_f) {
             break;
         }
-        nodes += 1;
-        let Node { mut fix, x, bound } = node;
-
-        // First-order dominance fixing on the original objective.
-        heuristic::dominance_fix(&model, &mut fix);
-        let n_free = fix.iter().filter(|&&v| v == FREE).count();
-        if n_free == 0 {
+        if out.nodes as usize >= max_depth || (out.nodes > 0 && clock.out()) {
+            out.open.push(node);
+            break;
+        }
+        out.nodes += 1;
+        let Node {
+            mut fix,
+            x,
+            bound,
+            seq,
+        } = node;
+        heuristic::dominance_fix(model, &mut fix);
+        if fix.iter().all(|&v| v != FREE) {
             for i in 0..n {
                 scratch_b[i] = fix[i] == 1;
             }
-            let f = model.f(&scratch_b);
-            if f < best_f {
-                best_f = f;
-                best_x.copy_from_slice(&scratch_b);
-            }
-            continue;
+            offer(model.f(&scratch_b), &scratch_b, &mut best_f, &mut out);
+            break;
         }
-
-        let relax = solver.solve(&model, &fix, &x, cutoff(best_f));
+        let relax = solver.solve(model, &fix, &x, cutoff(model, options, best_f), clock);
         let node_bound = relax.bound.max(bound);
-        let cut = cutoff(best_f);
-        if node_bound >= cut {
-            continue;
+        if node_bound >= cutoff(model, options, best_f) {
+            break;
         }
-
         // Incumbent: round and descend (cheap compared with the relaxation).
         for i in 0..n {
             scratch_b[i] = relax.x[i] > 0.5;
         }
+        heuristic::one_flip_descent(model, &mut scratch_b);
+        offer(model.f(&scratch_b), &scratch_b, &mut best_f, &mut out);
         let integral_relax =
             (0..n).all(|i| fix[i] != FREE || (relax.x[i] - relax.x[i].round()).abs() < 1e-9);
-        heuristic::one_flip_descent(&model, &mut scratch_b);
-        let f = model.f(&scratch_b);
-        if f < best_f {
-            best_f = f;
-            best_x.copy_from_slice(&scratch_b);
-        }
         if integral_relax && relax.converged {
             // The relaxation of this node has a binary minimiser: the node is solved.
-            let mut b = vec![false; n];
             for i in 0..n {
-                b[i] = if fix[i] == FREE {
+                scratch_b[i] = if fix[i] == FREE {
                     relax.x[i] > 0.5
                 } else {
                     fix[i] == 1
                 };
             }
-            let f = model.f(&b);
-            if f < best_f {
-                best_f = f;
-                best_x = b;
-            }
-            continue;
+            offer(model.f(&scratch_b), &scratch_b, &mut best_f, &mut out);
+            break;
         }
-        let cut = cutoff(best_f);
+        if clock.out() && !relax.converged {
+            // Stopped inside the relaxation: keep the node open with what we know.
+            out.open.push(Node {
+                fix,
+                x: relax.x,
+                bound: node_bound,
+                seq,
+            });
+            break;
+        }
+        let cut = cutoff(model, options, best_f);
         if node_bound >= cut {
-            continue;
+            break;
         }
-
         // Reduced-cost fixing from the linearisation behind the bound.
         let mut child_lb = vec![[node_bound; 2]; n];
         for i in 0..n {
@@ -396,67 +446,213 @@ pub fn solve_bqp(problem: &BqpProblem, options: &BqpOptions) -> Result<BqpSoluti
             }
         }
         if pruned {
-            continue;
+            break;
         }
-        // Branch on the free variable with the largest curvature-weighted fractionality.
-        let mut pick = None;
-        let mut pick_score = f64::NEG_INFINITY;
-        for i in 0..n {
-            if fix[i] != FREE {
-                continue;
-            }
-            let xi = relax.x[i];
-            let frac = xi.min(1.0 - xi).max(0.0);
-            let [l0, l1] = child_lb[i];
-            // Weight by the variable's own curvature: in Eq 4.12 it is the squared chord
-            // between the two candidates, so near-tangent frames (short chords, little
-            // effect on the cost) are branched on last. This cut the nodes on articulated
-            // programs from real mocap by 10–1000× against plain most-fractional.
-            let weight = model.qs[i * n + i].abs().max(f64::MIN_POSITIVE);
-            let score = frac * weight + 1e-12 * (l0.min(l1) - node_bound);
-            if score > pick_score {
-                pick_score = score;
-                pick = Some(i);
-            }
-        }
-        let mut xw = relax.x.clone();
-        for i in 0..n {
-            if fix[i] != FREE {
-                xw[i] = f64::from(fix[i]);
-            }
-        }
-        let Some(i) = pick else {
-            // Everything got fixed: evaluate the leaf.
+        let Some(i) = branch_variable(model, &fix, &relax, &child_lb, node_bound) else {
             for k in 0..n {
                 scratch_b[k] = fix[k] == 1;
             }
-            let f = model.f(&scratch_b);
-            if f < best_f {
-                best_f = f;
-                best_x.copy_from_slice(&scratch_b);
-            }
-            continue;
+            offer(model.f(&scratch_b), &scratch_b, &mut best_f, &mut out);
+            break;
         };
-        let near: i8 = if relax.x[i] > 0.5 { 1 } else { 0 };
-        for v in [1 - near, near] {
+        let mut xw = relax.x;
+        for k in 0..n {
+            if fix[k] != FREE {
+                xw[k] = f64::from(fix[k]);
+            }
+        }
+        let near: i8 = if xw[i] > 0.5 { 1 } else { 0 };
+        let child = |v: i8| {
             let mut fx = fix.clone();
             fx[i] = v;
             let mut xc = xw.clone();
             xc[i] = f64::from(v);
-            stack.push(Node {
+            Node {
                 fix: fx,
                 x: xc,
                 bound: child_lb[i][v as usize],
-            });
+                seq: 0,
+            }
+        };
+        out.open.push(child(1 - near));
+        current = Some(child(near));
+    }
+    out
+}
+
+/// Branching variable: the free variable with the largest curvature-weighted fractionality.
+fn branch_variable(
+    model: &Model,
+    fix: &[i8],
+    relax: &boxqp::Relaxation,
+    child_lb: &[[f64; 2]],
+    node_bound: f64,
+) -> Option<usize> {
+    let n = model.n;
+    let mut pick = None;
+    let mut pick_score = f64::NEG_INFINITY;
+    for i in 0..n {
+        if fix[i] != FREE {
+            continue;
+        }
+        let xi = relax.x[i];
+        let frac = xi.min(1.0 - xi).max(0.0);
+        let [l0, l1] = child_lb[i];
+        // Weight by the variable's own curvature: in Eq 4.12 it is the squared chord
+        // between the two candidates, so near-tangent frames (short chords, little effect
+        // on the cost) are branched on last. This cut the nodes on articulated programs
+        // from real mocap by 10–1000× against plain most-fractional.
+        let weight = model.qs[i * n + i].abs().max(f64::MIN_POSITIVE);
+        let score = frac * weight + 1e-12 * (l0.min(l1) - node_bound);
+        if score > pick_score {
+            pick_score = score;
+            pick = Some(i);
+        }
+    }
+    pick
+}
+
+/// Solves `min bᵀQb + cᵀb` over `b ∈ {0,1}ⁿ` exactly by branch-and-bound (see the module
+/// docs), or up to the limits in `options`.
+pub fn solve_bqp(problem: &BqpProblem, options: &BqpOptions) -> Result<BqpSolution> {
+    if let Some(t) = options.time_limit {
+        if t.is_zero() {
+            return Err(Error::invalid("time_limit", "must be positive"));
+        }
+    }
+    if !(options.abs_tol >= 0.0 && options.rel_tol >= 0.0) {
+        return Err(Error::invalid("abs_tol/rel_tol", "must be non-negative"));
+    }
+    if options.batch == 0 || options.dive_depth == 0 {
+        return Err(Error::invalid("batch/dive_depth", "must be at least 1"));
+    }
+    let clock = Clock::new(options.time_limit);
+    let n = problem.n;
+    if n == 0 {
+        return Ok(BqpSolution {
+            x: vec![],
+            objective: 0.0,
+            bound: 0.0,
+            gap: 0.0,
+            nodes: 0,
+            optimal: true,
+            root_bound: 0.0,
+        });
+    }
+    let mut w = problem.q.clone();
+    let mut h = problem.c.clone();
+    let qdiag: Vec<f64> = (0..n).map(|i| w[i * n + i]).collect();
+    for i in 0..n {
+        h[i] += w[i * n + i];
+        w[i * n + i] = 0.0;
+    }
+    let is_int = |v: f64| (v - v.round()).abs() <= 1e-12 * v.abs().max(1.0);
+    let integral = h.iter().all(|&v| is_int(v)) && w.iter().all(|&v| is_int(2.0 * v));
+    let mut model = Model {
+        n,
+        qs: w.clone(),
+        lin: h.clone(),
+        w,
+        h,
+        qdiag,
+        integral,
+    };
+    let trivial = trivial_bound(&model);
+
+    // Incumbent from the root: tabu search from zero (deterministic).
+    let mut best_x = vec![false; n];
+    let mut best_f = model.f(&best_x);
+    let tabu = heuristic::tabu_search(&model, &best_x, 20 * n + 200, &clock);
+    let tf = model.f(&tabu);
+    if tf < best_f {
+        best_f = tf;
+        best_x = tabu;
+    }
+    crate::interrupt::check()?;
+
+    // Convexifying shift (QCR from the SDP), tuned on the root relaxation.
+    let root_bound = shift::choose_shift(&mut model, &clock).max(trivial);
+    crate::interrupt::check()?;
+
+    let mut heap = std::collections::BinaryHeap::new();
+    let mut seq: u64 = 0;
+    heap.push(Open(Node {
+        fix: vec![FREE; n],
+        x: vec![0.5; n],
+        bound: trivial,
+        seq,
+    }));
+    let mut nodes: u64 = 0;
+    let mut solvers: Vec<boxqp::BoxQp> = Vec::new();
+    let mut interrupted = false;
+    loop {
+        // Drop what the incumbent prunes; stop when nothing is left.
+        let cut = cutoff(&model, options, best_f);
+        let mut batch = Vec::with_capacity(options.batch);
+        while batch.len() < options.batch {
+            match heap.pop() {
+                Some(Open(nd)) if nd.bound < cut => batch.push(nd),
+                Some(_) => continue,
+                None => break,
+            }
+        }
+        if batch.is_empty() {
+            break;
+        }
+        let over_nodes = options.node_limit.is_some_and(|m| nodes >= m);
+        if over_nodes || (nodes > 0 && clock.out()) {
+            heap.extend(batch.into_iter().map(Open));
+            interrupted = true;
+            break;
+        }
+        let depth = match options.node_limit {
+            Some(m) => (options.dive_depth as u64).min((m - nodes).max(1)) as usize,
+            None => options.dive_depth,
+        };
+        while solvers.len() < batch.len() {
+            solvers.push(boxqp::BoxQp::new(n));
+        }
+        let incumbent = best_f;
+        let run = |(nd, solver): (Node, &mut boxqp::BoxQp)| {
+            dive(&model, options, &clock, solver, nd, incumbent, depth)
+        };
+        // Small problems: a dive takes microseconds, less than handing it to another thread.
+        let outs: Vec<DiveOut> = if options.parallel && batch.len() > 1 && n >= PARALLEL_MIN_N {
+            use rayon::prelude::*;
+            batch
+                .into_par_iter()
+                .zip(solvers.par_iter_mut())
+                .map(run)
+                .collect()
+        } else {
+            batch.into_iter().zip(solvers.iter_mut()).map(run).collect()
+        };
+        // Merge in batch order: the result does not depend on thread timing.
+        for o in outs {
+            nodes += o.nodes;
+            if let Some((f, b)) = o.best {
+                if f < best_f {
+                    best_f = f;
+                    best_x = b;
+                }
+            }
+            for mut nd in o.open {
+                seq += 1;
+                nd.seq = seq;
+                heap.push(Open(nd));
+            }
+        }
+        if crate::interrupt::requested() {
+            return Err(Error::Interrupted);
         }
     }
 
     let (bound, optimal) = if interrupted {
-        let open = stack
+        let open = heap
             .iter()
-            .map(|nd| nd.bound)
+            .map(|nd| nd.0.bound)
             .fold(f64::INFINITY, f64::min);
-        (open.min(best_f), false)
+        (open.max(trivial).min(best_f), false)
     } else {
         (best_f, true)
     };
@@ -470,7 +666,7 @@ pub fn solve_bqp(problem: &BqpProblem, options: &BqpOptions) -> Result<BqpSoluti
     let gap = if objective <= bound {
         0.0
     } else {
-        (objective - bound) / objective.abs().max(bound.abs())
+        (objective - bound) / objective.abs().max(bound.abs()).max(f64::MIN_POSITIVE)
     };
     Ok(BqpSolution {
         x: best_x,
@@ -479,6 +675,7 @@ pub fn solve_bqp(problem: &BqpProblem, options: &BqpOptions) -> Result<BqpSoluti
         gap,
         nodes,
         optimal,
+        root_bound: root_bound.min(objective),
     })
 }
 
