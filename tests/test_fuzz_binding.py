@@ -21,9 +21,7 @@ WORKER = Path(__file__).with_name("_fuzz_worker.py")
 EXAMPLES = 120
 
 # Functions that still crash, each with its owner's reason; strict, so fixing it shows.
-KNOWN_CRASHES: dict[str, str] = {
-    "reconstruct_skeleton": "i12-bqp/i12-artic: time_limit=1e20/inf panics (Duration)",
-}
+KNOWN_CRASHES: dict[str, str] = {}
 
 
 def _functions() -> list[str]:
