@@ -14,7 +14,7 @@ import shutil
 import sys
 import time
 import warnings
-from collections.abc import Callable, Mapping, Sequence
+from collections.abc import Callable, Iterator, Mapping, Sequence
 from dataclasses import dataclass, fields, replace
 from pathlib import Path
 from typing import Any, Literal, get_args
@@ -171,6 +171,14 @@ class VideoSfmOptions:
     min_inliers : fewest PnP inliers for a pose of a frame between keyframes.
     max_rms : largest reprojection RMS (pixels) of a trusted pose.
     ransac_px : PnP RANSAC threshold, pixels.
+    max_split : a frame between two keyframes is posed from the tracks of each alone too; if
+        the two centres differ by more than this (metres), it is dropped.
+    max_split_turn : likewise for their rotations, radians (default 1°).
+    max_jump : a frame between keyframes farther than this from the mean of its two
+        neighbours is dropped, metres (a gross-error check: rendered and real heads move
+        up to ~0.4 m from that mean at 10 fps). Without a metric scale, 0.2 of the median
+        keyframe-to-point depth stands for ``max_jump`` (and ``max_split`` in proportion).
+    max_turn : likewise for rotation, radians (default 30°).
     num_threads : threads for SIFT, matching and mapping.
     seed : seeds the retrieval vocabulary, the mapper and RANSAC.
     """
@@ -186,6 +194,10 @@ class VideoSfmOptions:
     min_inliers: int = 25
     max_rms: float = 2.0
     ransac_px: float = 2.0
+    max_split: float = 0.03
+    max_split_turn: float = 0.0175
+    max_jump: float = 0.5
+    max_turn: float = 0.524
     num_threads: int = 2
     seed: int = 0
 
@@ -203,6 +215,10 @@ class VideoSfmOptions:
         check_int(self.min_inliers, "min_inliers", min=6)
         check_float(self.max_rms, "max_rms", min=0.0, min_exclusive=True)
         check_float(self.ransac_px, "ransac_px", min=0.0, min_exclusive=True)
+        check_float(self.max_split, "max_split", min=0.0, min_exclusive=True)
+        check_float(self.max_split_turn, "max_split_turn", min=0.0, min_exclusive=True)
+        check_float(self.max_jump, "max_jump", min=0.0, min_exclusive=True)
+        check_float(self.max_turn, "max_turn", min=0.0, min_exclusive=True, max=np.pi)
         check_int(self.num_threads, "num_threads", min=1, max=1024)
         check_seed(self.seed)
         for name in ("global_mapping", "refine_intrinsics"):
@@ -645,32 +661,27 @@ def _quat_wxyz(R: FloatArray) -> FloatArray:
 
 
 def _neighbour_outliers(
-    C: FloatArray, R: FloatArray, consecutive: npt.NDArray[np.bool_]
+    idx: npt.NDArray[np.int64], C: FloatArray, R: FloatArray, jump: float, turn: float
 ) -> npt.NDArray[np.bool_]:
-    """Poses that disagree with both temporal neighbours: centre or rotation far from the
-    mean of the previous and next posed frames (robust threshold: 10 MADs above the
-    median over the video, at least 1 % of the video's extent / 1°)."""
-    n = len(C)
+    """Posed frames (output indices ``idx``, centres ``C (N, 3)``, rotations ``R (N, 3, 3)``)
+    that disagree with both temporal neighbours: centre farther than ``jump`` from the mean
+    of the previous and next posed frames, or rotation more than ``turn`` radians from
+    their mean; frames at the ends compare with the one neighbour they have (``2 jump``)."""
+    n = len(idx)
     bad = np.zeros(n, bool)
-    if n < 5:
+    if n < 3:
         return bad
-    mid = consecutive[1:-1]
-    dc = np.linalg.norm(C[1:-1] - 0.5 * (C[:-2] + C[2:]), axis=1)
-    Rm = R[:-2] + R[2:]
-    # angle between R[i] and the chordal mean of its neighbours
-    u, _, vt = np.linalg.svd(Rm)
-    Ravg = u @ vt
-    cosang = (np.einsum("nij,nij->n", R[1:-1], Ravg) - 1) / 2
-    dang = np.arccos(np.clip(cosang, -1, 1))
-    extent = float(np.linalg.norm(np.ptp(C, axis=0))) + 1e-12
-    for d, floor in ((dc, 0.01 * extent), (dang, np.radians(1.0))):
-        ok = d[mid]
-        if len(ok) < 3:
+    for i in range(n):
+        nb = [j for j in (i - 1, i + 1) if 0 <= j < n and abs(int(idx[j]) - int(idx[i])) <= 2]
+        if not nb:
             continue
-        med = float(np.median(ok))
-        mad = float(np.median(np.abs(ok - med))) * 1.4826
-        thr = max(med + 10 * mad, floor)
-        bad[1:-1] |= mid & (d > thr)
+        c_ref = C[nb].mean(axis=0)
+        u, _, vt = np.linalg.svd(R[nb].sum(axis=0))
+        R_ref = u @ vt
+        ang = np.arccos(np.clip((np.trace(R[i] @ R_ref.T) - 1) / 2, -1.0, 1.0))
+        lim = jump if len(nb) == 2 else 2 * jump
+        if np.linalg.norm(C[i] - c_ref) > lim or ang > (turn if len(nb) == 2 else 2 * turn):
+            bad[i] = True
     return bad
 
 
@@ -731,7 +742,6 @@ def reconstruct_videos(
     import pycolmap
     from tqdm import tqdm
 
-    from socialcam._posetrack import KeyframeTracker
     from socialcam.video import open_video
 
     opts = _options(options, overrides)
@@ -787,18 +797,18 @@ def reconstruct_videos(
         (kf_root / v).mkdir(parents=True)
         times: list[float] = []
         kfs: list[str] = []
-        try:
-            for k, fr in enumerate(vid.frames(fps=opts.fps)):
-                times.append(float(fr.time))
-                if k % step == 0 and _usable(fr.image):
-                    name = f"{v}/{k:06d}.png"
-                    _write_png(kf_root / name, fr.image)
-                    kfs.append(name)
-        except Exception as exc:  # a decoder error ends this video, not the run
-            warns.append(
-                f"{vid.info.path}: decoding stopped after {len(times)} output frames "
-                f"({type(exc).__name__}: {exc}); later frames are not posed"
-            )
+        for k, fr in enumerate(_decoded(vid, opts.fps, gray=False)):
+            if isinstance(fr, Exception):  # a decoder error ends this video, not the run
+                warns.append(
+                    f"{vid.info.path}: decoding stopped after {len(times)} output frames "
+                    f"({type(fr).__name__}: {fr}); later frames are not posed"
+                )
+                break
+            times.append(float(fr.time))
+            if k % step == 0 and _usable(fr.image):
+                name = f"{v}/{k:06d}.png"
+                _write_png(kf_root / name, fr.image)
+                kfs.append(name)
         local_times.append(times)
         kf_names.append(kfs)
         bar.update(1)
@@ -877,7 +887,14 @@ def reconstruct_videos(
     lap("mapping")
 
     # ---- which wearers are in the model, and their lenses
-    reg = {img.name: img for img in rec.images.values()}
+    # A registered keyframe must observe enough map points: pycolmap can leave an image
+    # "registered" with no observation and a pose far away (seen: 300 units off).
+    reg = {
+        img.name: img
+        for img in rec.images.values()
+        if img.has_pose and img.num_points3D >= opts.min_inliers
+    }
+    n_bad_kf = sum(1 for img in rec.images.values() if img.has_pose) - len(reg)
     lens: dict[str, Any] = {}
     for img in reg.values():
         lens.setdefault(img.name.split("/")[0], rec.cameras[img.camera_id])
@@ -915,6 +932,7 @@ def reconstruct_videos(
     quality: dict[str, FrameQuality] = {}
     raw_R: dict[str, FloatArray] = {}
     raw_t: dict[str, FloatArray] = {}
+    splits: dict[str, FloatArray] = {}
     total = sum(len(t) for n, t in zip(names, local_times, strict=True) if n in lens)
     bar = tqdm(total=total, desc="posing frames", unit="frame", disable=not progress)
     for v, (name, vid) in enumerate(zip(names, vids, strict=True)):
@@ -925,59 +943,29 @@ def reconstruct_videos(
         n_inl = np.zeros(F, np.int64)
         is_kf = np.zeros(F, bool)
         reasons: dict[int, str] = {}
+        splits[name] = np.full((F, 2), np.nan)
         if name not in lens:
             reasons = dict.fromkeys(range(F), "wearer not placed in the model")
         else:
-            tracker = KeyframeTracker(
+            err = _pose_video(
+                vid,
+                name,
+                F,
+                rec,
+                reg,
                 lens[name],
-                min_inliers=opts.min_inliers,
-                max_rms=opts.max_rms,
-                ransac_px=opts.ransac_px,
-                fb_px=1.0,
-                seed=opts.seed,
+                opts,
+                bar,
+                Rs,
+                ts,
+                rms,
+                n_inl,
+                is_kf,
+                reasons,
+                splits[name],
             )
-            started = False
-            try:
-                for k, fr in enumerate(vid.frames(fps=opts.fps, gray=True)):
-                    if k >= F:
-                        break
-                    bar.update(1)
-                    img_name = f"{name}/{k:06d}.png"
-                    gray = np.ascontiguousarray(fr.image)
-                    if not _usable(gray):
-                        reasons[k] = "unreadable frame"
-                        continue
-                    if img_name in reg:
-                        im = reg[img_name]
-                        pose = (
-                            im.cam_from_world()
-                            if callable(im.cam_from_world)
-                            else im.cam_from_world
-                        )
-                        R = np.asarray(pose.rotation.matrix(), dtype=np.float64)
-                        t = np.asarray(pose.translation, dtype=np.float64)
-                        px, X, r = _keyframe_observations(rec, im)
-                        tracker.reset(gray, px, X, R, t)
-                        started = True
-                        Rs[k], ts[k], rms[k], n_inl[k], is_kf[k] = R, t, r, len(px), True
-                        continue
-                    if not started:
-                        reasons[k] = "before the first registered keyframe"
-                        tracker.prev = gray
-                        continue
-                    tracker.advance(gray)
-                    fp = tracker.pose()
-                    if fp.R is None:
-                        reasons[k] = fp.reason
-                    else:
-                        Rs[k], ts[k], rms[k], n_inl[k] = fp.R, fp.t, fp.rms, fp.n_inliers
-            except Exception as exc:
-                warns.append(
-                    f"{vid.info.path}: decoding failed while posing ({type(exc).__name__}: {exc})"
-                )
-            for k in range(F):
-                if np.isnan(Rs[k, 0, 0]) and k not in reasons:
-                    reasons[k] = "frame not decoded"
+            if err:
+                warns.append(err)
         raw_R[name], raw_t[name] = Rs, ts
         quality[name] = FrameQuality(
             times=readonly(np.asarray(local_times[v], dtype=np.float64) + offsets[v]),
@@ -990,21 +978,10 @@ def reconstruct_videos(
     bar.close()
     lap("posing frames")
 
-    # ---- neighbour check, in map coordinates
-    cent: dict[str, FloatArray] = {}
-    for name in lens:
-        Rs, ts, q = raw_R[name], raw_t[name], quality[name]
-        C = -np.einsum("fji,fj->fi", np.nan_to_num(Rs), np.nan_to_num(ts))
-        idx = np.flatnonzero(q.posed)
-        consecutive = np.zeros(len(idx), bool)
-        if len(idx) >= 3:
-            consecutive[1:-1] = (idx[2:] - idx[:-2]) == 2
-        bad = _neighbour_outliers(C[idx], Rs[idx], consecutive) & ~q.keyframe[idx]
-        for k in idx[bad]:
-            q.reasons[int(k)] = "disagrees with its neighbours"
-            q.posed[k] = False
-            q.rms[k] = np.nan
-        cent[name] = C
+    cent: dict[str, FloatArray] = {
+        name: -np.einsum("fji,fj->fi", np.nan_to_num(raw_R[name]), np.nan_to_num(raw_t[name]))
+        for name in lens
+    }
 
     # ---- world frame: gravity from the mean camera "up", metric scale
     kf_R = np.array(
@@ -1047,6 +1024,42 @@ def reconstruct_videos(
     else:
         warns.append("no known_distance or eye_height: poses are in the map's own unit, not metres")
     s = 1.0 if not np.isfinite(scale) else scale
+
+    # ---- neighbour check: a frame between keyframes whose pose jumps away from both its
+    # neighbours (more than max_jump metres, or 2 % of the median keyframe-to-point depth
+    # without a metric scale; or more than max_turn) is dropped.
+    if np.isfinite(scale):
+        jump = opts.max_jump / s
+    else:
+        depth = [
+            np.median(
+                np.linalg.norm(_keyframe_observations(rec, im)[1] - im.projection_center(), axis=1)
+            )
+            for im in list(reg.values())[:: max(1, len(reg) // 20)]
+        ]
+        jump = 0.2 * float(np.median(depth))
+    for name in lens:
+        q = quality[name]
+        sp = splits[name]
+        with np.errstate(invalid="ignore"):
+            split_bad = q.posed & (
+                (sp[:, 0] > jump * opts.max_split / opts.max_jump)
+                | (sp[:, 1] > opts.max_split_turn)
+            )
+        for k in np.flatnonzero(split_bad):
+            q.reasons[int(k)] = (
+                f"the tracks of the keyframes before and after disagree ({sp[k, 0] * s:.3g} "
+                f"{'m' if np.isfinite(scale) else 'map units'}, {np.degrees(sp[k, 1]):.2f}°)"
+            )
+            q.posed[k] = False
+            q.rms[k] = np.nan
+        idx = np.flatnonzero(q.posed)
+        bad = _neighbour_outliers(idx, cent[name][idx], raw_R[name][idx], jump, opts.max_turn)
+        bad &= ~q.keyframe[idx]
+        for k in idx[bad]:
+            q.reasons[int(k)] = "jumps away from both neighbours"
+            q.posed[k] = False
+            q.rms[k] = np.nan
     origin = (first_C @ G.T).mean(axis=0)
     if floor is not None:
         origin[2] = floor
@@ -1080,6 +1093,7 @@ def reconstruct_videos(
     counts = {
         "keyframes": sum(len(k) for k in kf_names),
         "registered_keyframes": len(reg),
+        "keyframes_rejected": n_bad_kf,
         "pairs": len(pairs),
         "models": len(models),
         "points": len(world_pts),
@@ -1117,6 +1131,21 @@ def reconstruct_videos(
 class VideoPosesWarning(UserWarning):
     """Something a user of :func:`reconstruct_videos` should know (low confidence, dropped
     wearers, wrong intrinsics, no scale)."""
+
+
+def _decoded(vid: Any, fps: float, *, gray: bool) -> Iterator[Any]:
+    """The frames of ``vid`` at ``fps``; a decoder exception is yielded (and ends the
+    stream) instead of raised, so that one broken file does not end the run."""
+    it = iter(vid.frames(fps=fps, gray=gray))
+    while True:
+        try:
+            fr = next(it)
+        except StopIteration:
+            return
+        except Exception as exc:
+            yield exc
+            return
+        yield fr
 
 
 def _usable(img: Any) -> bool:
@@ -1180,6 +1209,121 @@ def _map(
         inc.ba_refine_principal_point = False
         inc.ba_refine_extra_params = False
     return dict(pycolmap.incremental_mapping(db_path, kf_root, sparse, options=inc))
+
+
+def _pose_video(
+    vid: Any,
+    name: str,
+    F: int,
+    rec: Any,
+    reg: dict[str, Any],
+    lens: Any,
+    opts: VideoSfmOptions,
+    bar: Any,
+    Rs: FloatArray,
+    ts: FloatArray,
+    rms: FloatArray,
+    n_inl: npt.NDArray[np.int64],
+    is_kf: npt.NDArray[np.bool_],
+    reasons: dict[int, str],
+    split: FloatArray,
+) -> str:
+    """Poses the output frames of one video (fills the arrays in place): registered
+    keyframes from the model; the frames between two keyframes from the map points of both,
+    tracked forward from the one before and backward from the one after, then PnP; with
+    both, ``split (F, 2)`` receives the distance (map units) and angle (radians) between the
+    poses from each side's tracks alone. Holds at
+    most one keyframe interval of grey frames. Returns a warning ('' if none)."""
+    from socialcam._posetrack import solve_pnp, track
+
+    kf: tuple[Any, FloatArray, FloatArray, FloatArray, FloatArray] | None
+    kf = None  # the last registered keyframe: gray, px, X, R, t
+    pending: list[tuple[int, Any]] = []
+
+    def flush(nxt: tuple[Any, ...] | None) -> None:
+        if not pending:
+            return
+        grays = [g for _, g in pending]
+        fwd = track(kf[0], kf[1], kf[2], grays, fb_px=1.0) if kf is not None else None
+        bwd = (
+            track(nxt[0], nxt[1], nxt[2], grays[::-1], fb_px=1.0)[::-1] if nxt is not None else None
+        )
+        for j, (k, _) in enumerate(pending):
+            parts = [p[j] for p in (fwd, bwd) if p is not None]
+            px = np.concatenate([p[0] for p in parts])
+            X = np.concatenate([p[1] for p in parts])
+            # The nearer keyframe's pose starts the PnP iterations.
+            near = kf if (nxt is None or (kf is not None and j < len(pending) / 2)) else nxt
+            assert near is not None
+            fp = solve_pnp(
+                lens,
+                px,
+                X,
+                (near[3], near[4]),
+                min_inliers=opts.min_inliers,
+                max_rms=opts.max_rms,
+                ransac_px=opts.ransac_px,
+                seed=opts.seed,
+            )
+            if fp.R is None or fp.t is None:
+                reasons[k] = fp.reason
+                continue
+            Rs[k], ts[k], rms[k], n_inl[k] = fp.R, fp.t, fp.rms, fp.n_inliers
+            if len(parts) == 2:
+                # Two independent poses, from the tracks of each keyframe: their
+                # disagreement is measured here and judged once the scale is known.
+                one = [
+                    solve_pnp(
+                        lens,
+                        p[0],
+                        p[1],
+                        (fp.R, fp.t),
+                        min_inliers=opts.min_inliers,
+                        max_rms=opts.max_rms,
+                        ransac_px=opts.ransac_px,
+                        seed=opts.seed,
+                    )
+                    for p in parts
+                ]
+                a, b = one
+                if a.R is not None and b.R is not None and a.t is not None and b.t is not None:
+                    split[k, 0] = np.linalg.norm(a.R.T @ a.t - b.R.T @ b.t)
+                    cosang = (np.trace(a.R @ b.R.T) - 1) / 2
+                    split[k, 1] = np.arccos(np.clip(cosang, -1.0, 1.0))
+        pending.clear()
+
+    message = ""
+    for k, fr in enumerate(_decoded(vid, opts.fps, gray=True)):
+        if isinstance(fr, Exception):  # a decoder error: what was posed stays
+            message = (
+                f"{vid.info.path}: decoding failed while posing after {k} output frames "
+                f"({type(fr).__name__}: {fr}); later frames are not posed"
+            )
+            break
+        if k >= F:
+            break
+        bar.update(1)
+        gray = np.ascontiguousarray(fr.image)
+        if not _usable(gray):
+            reasons[k] = "unreadable frame"
+            continue
+        im = reg.get(f"{name}/{k:06d}.png")
+        if im is None:
+            pending.append((k, gray))
+            continue
+        pose = im.cam_from_world() if callable(im.cam_from_world) else im.cam_from_world
+        R = np.asarray(pose.rotation.matrix(), dtype=np.float64)
+        t = np.asarray(pose.translation, dtype=np.float64)
+        px, X, r = _keyframe_observations(rec, im)
+        nxt = (gray, px, X, R, t)
+        flush(nxt)
+        kf = nxt
+        Rs[k], ts[k], rms[k], n_inl[k], is_kf[k] = R, t, r, len(px), True
+    flush(None)
+    for k in range(F):
+        if np.isnan(Rs[k, 0, 0]) and k not in reasons:
+            reasons[k] = "frame not decoded"
+    return message
 
 
 def _keyframe_observations(rec: Any, image: Any) -> tuple[FloatArray, FloatArray, float]:
