@@ -19,7 +19,7 @@ import numpy.typing as npt
 FloatArray = npt.NDArray[np.float64]
 
 #: Lucas–Kanade settings: 21-px window, 4 pyramid levels (motion up to ~150 px at 10 fps).
-_LK = {
+_LK: dict[str, Any] = {
     "winSize": (21, 21),
     "maxLevel": 4,
     "criteria": (3, 30, 0.01),  # cv2.TERM_CRITERIA_EPS | COUNT, 30 iterations, 0.01 px
@@ -142,4 +142,5 @@ def solve_pnp(
     rms = float(np.sqrt((res**2).sum(axis=1).mean()))
     if rms > max_rms:
         return FramePose(None, None, rms, len(idx), f"reprojection RMS {rms:.2f} px")
-    return FramePose(cv2.Rodrigues(rvec)[0], tvec.ravel().astype(np.float64), rms, len(idx), "")
+    R = np.asarray(cv2.Rodrigues(rvec)[0], dtype=np.float64)
+    return FramePose(R, np.asarray(tvec, dtype=np.float64).ravel(), rms, len(idx), "")

@@ -163,8 +163,8 @@ class VideoSfmOptions:
     max_features : SIFT features per keyframe.
     sequential_overlap : each keyframe is matched with this many following keyframes of
         the same video.
-    cross_pairs : each keyframe is matched with its ``cross_pairs`` most similar keyframes of
-        the other videos (retrieval by a TF-IDF bag of SIFT words computed here; the
+    cross_pairs : each keyframe is matched with its ``cross_pairs`` most similar keyframes in
+        each other video (retrieval by a TF-IDF bag of SIFT words computed here; the
         vocabulary tree of COLMAP is never used).
     global_mapping : use COLMAP's global mapper instead of the incremental one.
     refine_intrinsics : with given ``intrinsics``, let bundle adjustment refine them.
@@ -188,7 +188,7 @@ class VideoSfmOptions:
     camera_model: VideoCameraModel = "SIMPLE_RADIAL"
     max_features: int = 2048
     sequential_overlap: int = 3
-    cross_pairs: int = 4
+    cross_pairs: int = 3
     global_mapping: bool = False
     refine_intrinsics: bool = True
     min_inliers: int = 25
@@ -345,7 +345,7 @@ class VideoReconstruction:
                 c = self.cameras[name]
                 arrays[f"{i}_R"], arrays[f"{i}_C"], arrays[f"{i}_K"] = c.R, c.C, c.K
         buf = io.BytesIO()
-        np.savez(buf, **arrays)
+        np.savez(buf, **arrays)  # type: ignore[arg-type]
         atomic_write_bytes(self.out_dir / "reconstruction.npz", buf.getvalue())
         meta = self.to_dict()
         meta["reasons"] = {
@@ -556,7 +556,7 @@ def _retrieval_pairs(
     seed: int,
 ) -> list[tuple[str, str]]:
     """Keyframe pairs to match: ``overlap`` following keyframes in the same video, and the
-    ``cross`` most similar keyframes of the other videos by a TF-IDF bag of SIFT words
+    ``cross`` most similar keyframes in each other video by a TF-IDF bag of SIFT words
     (a small vocabulary k-means'd here from the keyframes' own descriptors)."""
     import cv2
     import pycolmap
@@ -581,7 +581,7 @@ def _retrieval_pairs(
     sample = pool[rng.choice(len(pool), size=min(len(pool), 10000), replace=False)]
     n_words = 200
     cv2.setRNGSeed(seed)
-    _, _, centres = cv2.kmeans(
+    _, _, centres = cv2.kmeans(  # type: ignore[call-overload]
         sample,
         n_words,
         None,
@@ -603,11 +603,14 @@ def _retrieval_pairs(
     sim = vec @ vec.T
     video = np.array([v for v, _, _ in flat])
     for i in range(len(flat)):
-        s = np.where(video != video[i], sim[i], -np.inf)
-        for j in np.argsort(-s, kind="stable")[:cross]:
-            if np.isfinite(s[j]):
-                a, b = sorted((flat[i][2], flat[j][2]))
-                pairs.add((a, b))
+        for other in range(len(by_video)):
+            if other == video[i]:
+                continue
+            s = np.where(video == other, sim[i], -np.inf)
+            for j in np.argsort(-s, kind="stable")[:cross]:
+                if np.isfinite(s[j]):
+                    a, b = sorted((flat[i][2], flat[j][2]))
+                    pairs.add((a, b))
     return sorted(pairs)
 
 
@@ -652,7 +655,7 @@ def _floor_height(points: FloatArray, cam_heights: FloatArray, seed: int) -> flo
 
 def _quat_wxyz(R: FloatArray) -> FloatArray:
     """Unit quaternions ``(N, 4)`` (w, x, y, z; w ≥ 0) of rotations ``(N, 3, 3)``."""
-    from scipy.spatial.transform import Rotation
+    from scipy.spatial.transform import Rotation  # type: ignore[import-untyped]
 
     q = Rotation.from_matrix(R).as_quat()  # x, y, z, w
     q = np.c_[q[:, 3], q[:, :3]]
@@ -740,7 +743,7 @@ def reconstruct_videos(
         options, no model at all — naming the file or argument and what to do.
     """
     import pycolmap
-    from tqdm import tqdm
+    from tqdm import tqdm  # type: ignore[import-untyped]
 
     from socialcam.video import open_video
 
@@ -947,7 +950,7 @@ def reconstruct_videos(
         if name not in lens:
             reasons = dict.fromkeys(range(F), "wearer not placed in the model")
         else:
-            err = _pose_video(
+            problem = _pose_video(
                 vid,
                 name,
                 F,
@@ -964,8 +967,8 @@ def reconstruct_videos(
                 reasons,
                 splits[name],
             )
-            if err:
-                warns.append(err)
+            if problem:
+                warns.append(problem)
         raw_R[name], raw_t[name] = Rs, ts
         quality[name] = FrameQuality(
             times=readonly(np.asarray(local_times[v], dtype=np.float64) + offsets[v]),
@@ -1046,7 +1049,7 @@ def reconstruct_videos(
                 (sp[:, 0] > jump * opts.max_split / opts.max_jump)
                 | (sp[:, 1] > opts.max_split_turn)
             )
-        for k in np.flatnonzero(split_bad):
+        for k in map(int, np.flatnonzero(split_bad)):
             q.reasons[int(k)] = (
                 f"the tracks of the keyframes before and after disagree ({sp[k, 0] * s:.3g} "
                 f"{'m' if np.isfinite(scale) else 'map units'}, {np.degrees(sp[k, 1]):.2f}°)"
@@ -1076,9 +1079,9 @@ def reconstruct_videos(
         K = np.asarray(lens[name].calibration_matrix(), dtype=np.float64).copy()
         K[0, 2] += COLMAP_TO_OPENCV_PIXEL
         K[1, 2] += COLMAP_TO_OPENCV_PIXEL
-        cam = Cameras(K, Rw, Cw, q.times[idx])
-        cam._colmap = [lens[name]] * len(idx)
-        cameras[name] = cam
+        posed_cams = Cameras(K, Rw, Cw, q.times[idx])
+        posed_cams._colmap = [lens[name]] * len(idx)
+        cameras[name] = posed_cams
     sim = pycolmap.Sim3d(s, pycolmap.Rotation3d(G), tvec)
     rec.transform(sim)
     model_dir = out / "model"
