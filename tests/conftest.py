@@ -16,3 +16,33 @@ def rng() -> np.random.Generator:
 @pytest.fixture(scope="session")
 def data_dir() -> Path:
     return DATA
+
+
+@pytest.fixture(scope="session")
+def small_scene(tmp_path_factory: pytest.TempPathFactory):
+    """A small rendered scene shared by the render / video / sync tests: 2 wearers × 2 s,
+    320×240, 30 fps, static room only in view of the truth checks (bodies and targets
+    drawn too)."""
+    from socialcam.synth.render import render_scene
+
+    out = tmp_path_factory.mktemp("scene")
+    return render_scene(out, n_wearers=2, duration=2.0, size=(320, 240), seed=3, progress=False)
+
+
+@pytest.fixture(scope="session")
+def room_scene(tmp_path_factory: pytest.TempPathFactory):
+    """1 wearer × 1 s, 320×240, with nothing moving in view (no bodies, no targets): every
+    pixel is a static surface, for exact truth checks."""
+    from socialcam.synth.render import render_scene
+
+    out = tmp_path_factory.mktemp("room")
+    return render_scene(
+        out,
+        n_wearers=1,
+        duration=1.0,
+        size=(320, 240),
+        seed=5,
+        progress=False,
+        n_targets=0,
+        bodies=False,
+    )

@@ -1,4 +1,4 @@
-"""Command line: ``socialcam demo`` and ``socialcam poses``."""
+"""Command line: ``socialcam demo``, ``socialcam render``, ``socialcam poses``."""
 
 from __future__ import annotations
 
@@ -75,9 +75,65 @@ def main(argv: Sequence[str] | None = None) -> int:
     )
     pz.add_argument("--seed", type=int, default=0, help="random seed (default: %(default)s)")
     pz.add_argument("--json", action="store_true", help="print the whole report as JSON")
+    render = sub.add_parser(
+        "render",
+        help="render a test scene: first-person videos (mp4, H.264 + AAC) with exact ground truth",
+    )
+    render.add_argument("out_dir", help="output folder (videos, truth.npz, truth.json)")
+    render.add_argument(
+        "--wearers", type=int, default=4, help="number of wearers (default: %(default)s)"
+    )
+    render.add_argument(
+        "--duration", type=float, default=20.0, help="seconds per video (default: %(default)s)"
+    )
+    render.add_argument("--fps", type=float, default=30.0, help="frame rate (default: %(default)s)")
+    render.add_argument("--size", default="640x480", help="WIDTHxHEIGHT (default: %(default)s)")
+    render.add_argument("--seed", type=int, default=0, help="scene seed (default: %(default)s)")
+    render.add_argument(
+        "--distortion", choices=["radial", "fisheye"], default=None, help="lens distortion"
+    )
+    render.add_argument("--no-calibration", action="store_true", help="no calibration segment")
+    render.add_argument("--no-audio", action="store_true", help="videos without audio")
+    render.add_argument(
+        "--sound-speed",
+        type=float,
+        default=None,
+        help="m/s: delay claps by distance (default: none)",
+    )
+    render.add_argument(
+        "--photos", nargs="*", default=None, help="image files to mix into the surface textures"
+    )
     args = parser.parse_args(argv)
     if args.command == "poses":
         return _poses(parser, args)
+    if args.command == "render":
+        from socialcam.synth.render import render_scene
+
+        try:
+            w, h = (int(x) for x in args.size.lower().split("x"))
+        except ValueError:
+            parser.error(f"--size: expected WIDTHxHEIGHT, got {args.size!r}")
+        try:
+            res = render_scene(
+                args.out_dir,
+                n_wearers=args.wearers,
+                duration=args.duration,
+                fps=args.fps,
+                size=(w, h),
+                seed=args.seed,
+                distortion=args.distortion,
+                calibration=not args.no_calibration,
+                audio=not args.no_audio,
+                progress=sys.stderr.isatty(),
+                sound_speed=args.sound_speed,
+                photos=args.photos,
+            )
+        except ValueError as exc:
+            parser.error(str(exc))
+        for p in res.videos:
+            print(p)
+        print(f"{res.truth_path} ({res.render_seconds:.1f} s)")
+        return 0
     if args.command == "demo":
         from socialcam.demo import run_demo
 
