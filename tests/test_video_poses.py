@@ -112,7 +112,9 @@ def test_poses_are_gravity_aligned_and_pinhole(scene, posed):
         K = rec.cameras[name].K[0]
         Kt = scene.truth.K[v]
         assert K[0, 0] == pytest.approx(Kt[0, 0], rel=0.01)  # measured 0.2 %
-        assert np.abs(K[:2, 2] - Kt[:2, 2]).max() < 3.0
+        # the principal point is not refined (image centre): exact up to the COLMAP→OpenCV
+        # half-pixel shift, which must be applied once
+        assert np.abs(K[:2, 2] - Kt[:2, 2]).max() < 0.05
 
 
 def test_run_folder_files(scene, posed):
