@@ -111,18 +111,25 @@ def poses(
         except (ValueError, OSError, KeyError):
             rec = None
     if rec is None:
-        with warnings.catch_warnings():
-            warnings.simplefilter("ignore", VideoPosesWarning)  # reported in report.json
-            rec = reconstruct_videos(
-                videos,
-                out_dir=cache,
-                sync=sync,
-                intrinsics=intrinsics,
-                known_distance=known_distance,
-                eye_height=eye_height,
-                options=opts,
-                progress=progress,
+        try:
+            with warnings.catch_warnings():
+                warnings.simplefilter("ignore", VideoPosesWarning)  # reported in report.json
+                rec = reconstruct_videos(
+                    videos,
+                    out_dir=cache,
+                    sync=sync,
+                    intrinsics=intrinsics,
+                    known_distance=known_distance,
+                    eye_height=eye_height,
+                    options=opts,
+                    progress=progress,
+                )
+        except ValueError as exc:  # the report says what went wrong, then the caller does
+            write_json(
+                out / "report.json",
+                {"errors": [str(exc)], "wall_seconds": time.perf_counter() - t0},
             )
+            raise
         atomic_write_bytes(key_file, (key + "\n").encode())
     atomic_write_bytes(out / "poses.csv", poses_csv(rec).encode())
     sync_out = {
@@ -139,6 +146,7 @@ def poses(
     }
     write_json(out / "sync.json", sync_out)
     report = rec.to_dict()
+    report["errors"] = []
     report["cached"] = cached
     report["wall_seconds"] = time.perf_counter() - t0
     report["options"] = asdict(opts)
