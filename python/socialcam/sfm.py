@@ -471,7 +471,15 @@ def _resolve_sync(vids: list[Any], sync: Any) -> tuple[FloatArray, dict[str, Any
     if tuple(res.names) != tuple(names):
         raise ValueError(f"sync: names {list(res.names)} do not match the videos {names}")
     off = np.asarray(res.offsets, dtype=np.float64)
-    d = res.to_dict() if hasattr(res, "to_dict") else {"names": names, "offsets": off.tolist()}
+    n = len(names)
+    conf = getattr(res, "confidence", None)
+    method = getattr(res, "method", None)
+    d = {
+        "names": names,
+        "offsets": off.tolist(),
+        "confidence": [None] * n if conf is None else [float(c) for c in conf],
+        "method": [None] * n if method is None else [str(m) for m in method],
+    }
     return off, d
 
 
@@ -979,6 +987,9 @@ def reconstruct_videos(
             reasons=reasons,
         )
     bar.close()
+    for vid in vids:
+        if hasattr(vid, "close"):
+            vid.close()
     lap("posing frames")
 
     cent: dict[str, FloatArray] = {
