@@ -1362,16 +1362,27 @@ def _centre_at(
     centres: dict[str, FloatArray],
     fps: float,
 ) -> FloatArray:
+    """Camera centre of ``person`` at common time ``t``: the posed frame at ``t`` (within
+    half a frame), else linearly interpolated between the posed frames around ``t`` when
+    both lie within 0.5 s."""
     q = quality.get(person)
     if q is None or person not in centres or not q.posed.any():
         raise ValueError(f"known_distance: {person} has no posed frame")
     idx = np.flatnonzero(q.posed)
-    k = idx[np.argmin(np.abs(q.times[idx] - t))]
-    if abs(q.times[k] - t) > 1.0 / fps:
-        raise ValueError(
-            f"known_distance: {person} has no posed frame within {1 / fps:.3f} s of t={t}"
-        )
-    return centres[person][k]
+    ts = q.times[idx]
+    k = int(np.argmin(np.abs(ts - t)))
+    if abs(ts[k] - t) <= 0.5 / fps:
+        return centres[person][idx[k]]
+    before, after = idx[ts <= t], idx[ts > t]
+    if len(before) and len(after):
+        i, j = before[-1], after[0]
+        if t - q.times[i] <= 0.5 and q.times[j] - t <= 0.5:
+            w = (t - q.times[i]) / (q.times[j] - q.times[i])
+            return (1 - w) * centres[person][i] + w * centres[person][j]
+    raise ValueError(
+        f"known_distance: {person} has no posed frame near t={t} s; give a time at which "
+        "that camera is posed"
+    )
 
 
 @dataclass(frozen=True)
