@@ -71,8 +71,8 @@ def track(
             out.append((np.zeros((0, 2)), Xs))
             prev = cur
             continue
-        p1, st1, _ = cv2.calcOpticalFlowPyrLK(prev, cur, pts, None, **_LK)
-        p0b, st2, _ = cv2.calcOpticalFlowPyrLK(cur, prev, p1, None, **_LK)
+        p1, st1, _ = cv2.calcOpticalFlowPyrLK(prev, cur, pts, None, **_LK)  # type: ignore[call-overload]
+        p0b, st2, _ = cv2.calcOpticalFlowPyrLK(cur, prev, p1, None, **_LK)  # type: ignore[call-overload]
         fb = np.linalg.norm((p0b - pts).reshape(-1, 2), axis=1)
         h, w = cur.shape[:2]
         q = p1.reshape(-1, 2)

@@ -780,7 +780,7 @@ def reconstruct_videos(
         timings[stage] = timings.get(stage, 0.0) + now - clock
         clock = now
 
-    vids = [open_video(p) for p in videos]
+    vids = [open_video(Path(p)) for p in videos]
     names = [v.info.name for v in vids]
     if len(set(names)) != len(names):
         raise ValueError(f"videos: two videos share a file stem (person name): {names}")
@@ -804,8 +804,8 @@ def reconstruct_videos(
     local_times: list[list[float]] = []
     kf_names: list[list[str]] = []
     bar = tqdm(total=len(vids), desc="keyframes", unit="video", disable=not progress)
-    for v, vid in zip(names, vids, strict=True):
-        (kf_root / v).mkdir(parents=True)
+    for person, vid in zip(names, vids, strict=True):
+        (kf_root / person).mkdir(parents=True)
         times: list[float] = []
         kfs: list[str] = []
         for k, fr in enumerate(_decoded(vid, opts.fps, gray=False)):
@@ -817,9 +817,9 @@ def reconstruct_videos(
                 break
             times.append(float(fr.time))
             if k % step == 0 and _usable(fr.image):
-                name = f"{v}/{k:06d}.png"
-                _write_png(kf_root / name, fr.image)
-                kfs.append(name)
+                kf_name = f"{person}/{k:06d}.png"
+                _write_png(kf_root / kf_name, fr.image)
+                kfs.append(kf_name)
         local_times.append(times)
         kf_names.append(kfs)
         bar.update(1)
