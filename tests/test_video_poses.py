@@ -387,6 +387,8 @@ def test_distorted_lens_scene(tmp_path, lens, no_vocab_tree):
     frac = rec.to_dict()["registered_fraction"]
     e = pose_errors(rec, _truth_cams(s.truth))
     got = (frac, e.to_dict())
+    # Thresholds are the small-scene ones; they pass here. Without undistortion between
+    # keyframes (mutation) this scene measured 75 % posed and 15 mm median centre error.
     assert frac >= 0.75, got
     assert np.median(e.centre) < 0.01, got
     assert np.degrees(np.median(e.rotation)) < 0.5, got
@@ -406,4 +408,4 @@ def test_distorted_lens_scene(tmp_path, lens, no_vocab_tree):
     # compare as normalised rays (the estimated K differs slightly from the true one)
     tn = (true_und - K[:2, 2]) / K[0, 0]
     en = (est_und - est_K[:2, 2]) / est_K[0, 0]
-    assert np.abs(tn - en).max() * K[0, 0] < 1.5  # pixels; measured …
+    assert np.abs(tn - en).max() * K[0, 0] < 1.5  # pixels
