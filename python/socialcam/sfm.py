@@ -927,7 +927,8 @@ def reconstruct_videos(
             if abs(f1 - f0) > 0.05 * f0:
                 warns.append(
                     f"{n}: the given intrinsics look wrong (focal {f0:.1f} px, the videos "
-                    f"say {f1:.1f} px); the refined values are used"
+                    f"say {f1:.1f} px); the poses are not to be trusted: rerun with "
+                    "intrinsics=None to self-calibrate"
                     if opts.refine_intrinsics
                     else f"{n}: the given intrinsics look wrong (focal {f0:.1f} px)"
                 )
