@@ -47,3 +47,22 @@ def test_console_script_and_bad_arguments():
     assert out.stdout.startswith("socialcam ")
     with pytest.raises(SystemExit):
         main(["demo", "--seed", "-3"])
+
+
+def test_render_command_writes_videos_and_truth(tmp_path, capsys):
+    out = tmp_path / "scene"
+    args = ["render", str(out), "--wearers", "2", "--duration", "0.4", "--size", "96x64"]
+    assert main([*args, "--seed", "3", "--fps", "15", "--distortion", "radial"]) == 0
+    assert sorted(p.name for p in out.iterdir()) == [
+        "truth.json",
+        "truth.npz",
+        "wearer0.mp4",
+        "wearer1.mp4",
+    ]
+    truth = json.loads((out / "truth.json").read_text())
+    assert truth["n_frames"] == [6, 6] and truth["dist"][0]["model"] == "radial"
+    assert "wearer1.mp4" in capsys.readouterr().out
+    with pytest.raises(SystemExit):
+        main(["render", str(out), "--size", "big"])
+    with pytest.raises(SystemExit):
+        main(["render", str(out), "--wearers", "0"])

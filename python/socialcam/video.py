@@ -85,7 +85,9 @@ class Video:
         self._container: Any = None
         self._files: list[Path] | None = None
         self._times: FloatArray | None = None
-        self.n_corrupt = 0
+        self.n_corrupt = 0  # distinct frames found undecodable so far
+        self._bad: set[int] = set()
+        self._last_error = ""
         if path.is_dir():
             self._open_folder(path, fps)
         else:
@@ -238,20 +240,23 @@ class Video:
             try:
                 frames = pkt.decode()
             except av.FFmpegError as exc:
-                self._corrupt(f"packet at pts {pkt.pts}: {exc}")
+                self._last_error = str(exc)
                 continue
             for fr in frames:
                 if fr.pts is None or int(fr.pts) not in index_of:
                     continue
                 if getattr(fr, "is_corrupt", False):
-                    self._corrupt(f"frame at pts {fr.pts} is corrupt")
+                    self._last_error = "flagged corrupt by the decoder"
                     continue
                 yield index_of[int(fr.pts)], fr
 
-    def _corrupt(self, what: str) -> None:
-        self.n_corrupt += 1
+    def _corrupt(self, index: int, what: str) -> None:
+        if index in self._bad:
+            return
+        self._bad.add(index)
+        self.n_corrupt = len(self._bad)
         warnings.warn(
-            f"{self._path}: skipped an undecodable frame ({what})",
+            f"{self._path}: skipped frame {index}, which cannot be decoded ({what})",
             CorruptFrameWarning,
             stacklevel=4,
         )
@@ -261,11 +266,11 @@ class Video:
         f = self._files[i]
         img = cv2.imread(str(f), cv2.IMREAD_GRAYSCALE if gray else cv2.IMREAD_COLOR)
         if img is None:
-            self._corrupt(f"image {f.name} cannot be read")
+            self._corrupt(i, f"image {f.name} cannot be read")
             return None
         if not gray:
             img = cv2.cvtColor(img, cv2.COLOR_BGR2RGB)
-        return img
+        return np.asarray(img, dtype=np.uint8)
 
     def frames(
         self,
@@ -278,8 +283,8 @@ class Video:
         """Streams frames. With ``fps``, for each output time ``k / fps`` in ``[start,
         end)`` the frame nearest to it (a frame can repeat when ``fps`` exceeds the video's
         rate); without, every frame with ``start ≤ time < end``. ``Frame.time`` is the
-        frame's own timestamp. Undecodable frames are skipped (the nearest decodable
-        neighbour stands in) and counted in :attr:`n_corrupt`."""
+        frame's own timestamp. Undecodable frames are skipped (nothing is yielded for
+        them), counted in :attr:`n_corrupt` and reported by a :class:`CorruptFrameWarning`."""
         times = self.timestamps()
         t0 = check_float(start, "start")
         t1 = float(times[-1]) + 1e-9 if end is None else check_float(end, "end")
@@ -303,27 +308,18 @@ class Video:
                 yield Frame(int(i), float(times[i]), img)
             return
         pos = 0
-        prev: tuple[int, Any] | None = None
         for idx, fr in self._decode(float(times[wanted[0]])):
-            while pos < len(wanted) and wanted[pos] <= idx:
-                w = int(wanted[pos])
-                if w == idx:
-                    use = (idx, fr)
-                elif prev is not None and abs(times[prev[0]] - times[w]) <= abs(
-                    times[idx] - times[w]
-                ):
-                    use = prev  # the wanted frame was undecodable: nearest neighbour
-                else:
-                    use = (idx, fr)
-                yield Frame(use[0], float(times[use[0]]), self._convert(use[1], gray))
+            while pos < len(wanted) and wanted[pos] < idx:
+                # that frame could not be decoded: skipped (counted, warned)
+                self._corrupt(int(wanted[pos]), self._last_error or "no picture")
+                pos += 1
+            while pos < len(wanted) and wanted[pos] == idx:
+                yield Frame(idx, float(times[idx]), self._convert(fr, gray))
                 pos += 1
             if pos >= len(wanted):
                 return
-            prev = (idx, fr)
-        if prev is not None:  # wanted frames after the last decodable one
-            while pos < len(wanted):
-                yield Frame(prev[0], float(times[prev[0]]), self._convert(prev[1], gray))
-                pos += 1
+        for w in wanted[pos:]:
+            self._corrupt(int(w), self._last_error or "no picture")
 
     def frame_at(self, t: float, *, gray: bool = False) -> Frame:
         """The frame nearest to local time ``t``."""
@@ -332,10 +328,7 @@ class Video:
         i = int(_nearest(times, np.array([tt]))[0])
         for fr in self.frames(start=float(times[i]), end=float(times[i]) + 1e-6, gray=gray):
             return fr
-        # undecodable: nearest decodable neighbour
-        for fr in self.frames(start=max(0.0, float(times[i]) - 1.0), gray=gray):
-            return fr
-        raise ValueError(f"{self._path}: no decodable frame near t = {tt}")
+        raise ValueError(f"{self._path}: the frame at t = {times[i]:.6f} s cannot be decoded")
 
     # ------------------------------------------------------------------ audio
     def audio(self) -> tuple[npt.NDArray[np.float32], int]:

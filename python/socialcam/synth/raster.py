@@ -109,17 +109,24 @@ def face(
     side of ``normal``. Vertical faces have ``u`` horizontal and ``v`` pointing down (the
     texture is upright); horizontal faces need ``right`` (the direction of ``u``)."""
     n = np.asarray(normal, dtype=np.float64)
-    n = n / np.linalg.norm(n)
+    n = n / np.sqrt(n @ n)
     if right is None:
-        r = np.cross([0.0, 0.0, 1.0], n)
+        r = np.array([-n[1], n[0], 0.0])  # z × n
     else:
         r = np.asarray(right, dtype=np.float64)
         r = r - (r @ n) * n
-    r = r / np.linalg.norm(r)
-    d = np.cross(r, n)  # v × u = n with u = r, v = d
+    r = r / np.sqrt(r @ r)
+    d = _cross(r, n)  # v × u = n with u = r, v = d
     c = np.asarray(centre, dtype=np.float64)
     origin = c - 0.5 * width * r - 0.5 * height * d
     return Plane(name, origin, r, d, (float(width), float(height)), texture)
+
+
+def _cross(a: FloatArray, b: FloatArray) -> FloatArray:
+    """Cross product of two 3-vectors (np.cross is slow on single vectors)."""
+    return np.array(
+        [a[1] * b[2] - a[2] * b[1], a[2] * b[0] - a[0] * b[2], a[0] * b[1] - a[1] * b[0]]
+    )
 
 
 def tiles(plane: Plane, max_size: float) -> list[Plane]:
@@ -190,7 +197,7 @@ class Renderer:
     )
 
     def __post_init__(self) -> None:
-        self._Kinv = np.linalg.inv(self.K)
+        self._Kinv = np.asarray(np.linalg.inv(self.K), dtype=np.float64)
         self._mips = [mip_pyramid(t) for t in self.textures]
         self._xs = np.arange(self.width, dtype=np.float32)
         self._ys = np.arange(self.height, dtype=np.float32)

@@ -556,10 +556,10 @@ def _plan_motion(
                 regard[sl, v] = _wall_point(room, rng)
             k += n
         c0, c1 = calib[v]
-        inside = (t >= c0) & (t < c1)
-        code[inside, v] = CALIBRATION
-        # the wearer turns to the point before the segment starts (pursuit settles)
-        regard[(t >= c0 - 1.0) & (t < c1), v] = calib_pts[v]
+        if c1 > c0:
+            code[(t >= c0) & (t < c1), v] = CALIBRATION
+            # the wearer turns to the point before the segment starts (pursuit settles)
+            regard[(t >= c0 - 1.0) & (t < c1), v] = calib_pts[v]
     u = regard - eyes
     u /= np.linalg.norm(u, axis=-1, keepdims=True)
     # --- head: rate-limited smooth pursuit of the true gaze after a change of target (the
@@ -861,7 +861,7 @@ def _yuv_frame(img: U8Image) -> Any:
     for plane, arr in zip(vf.planes, planes, strict=True):
         buf = np.zeros((plane.height, plane.line_size), np.uint8)
         buf[:, : arr.shape[1]] = arr
-        plane.update(buf)
+        plane.update(buf.tobytes())
     return vf
 
 
@@ -875,9 +875,26 @@ def _write_video(
     audio: npt.NDArray[np.float32] | None,
     crf: int,
 ) -> None:
+    tmp = path.with_name(path.stem + ".tmp" + path.suffix)
+    try:
+        _encode(tmp, frames, fps, width, height, audio, crf)
+    except BaseException:  # Ctrl-C or an error: no half-written file is left behind
+        tmp.unlink(missing_ok=True)
+        raise
+    os.replace(tmp, path)
+
+
+def _encode(
+    tmp: Path,
+    frames: Callable[[], Any],
+    fps: float,
+    width: int,
+    height: int,
+    audio: npt.NDArray[np.float32] | None,
+    crf: int,
+) -> None:
     import av
 
-    tmp = path.with_name(path.stem + ".tmp" + path.suffix)
     rate = _fps_fraction(fps)
     with av.open(str(tmp), mode="w") as out:
         vs = out.add_stream("libx264", rate=rate)
@@ -912,7 +929,6 @@ def _write_video(
                 out.mux(pkt)
         for pkt in vs.encode(None):
             out.mux(pkt)
-    os.replace(tmp, path)
 
 
 # ----------------------------------------------------------------------------- main
@@ -954,7 +970,7 @@ def render_scene(
     """
     out = Path(out_dir)
     V = check_int(n_wearers, "n_wearers", min=1, max=8)
-    dur = check_float(duration, "duration", min=0.2, max=3600.0)
+    dur = check_float(duration, "duration", min=0.2, max=600.0)  # audio is built in memory
     fps_ = check_float(fps, "fps", min=1.0, max=240.0)
     if not (isinstance(size, (tuple, list)) and len(size) == 2):
         raise ValueError(f"size: expected (width, height), got {size!r}")
@@ -983,7 +999,7 @@ def render_scene(
     rng = np.random.default_rng([seed_, 9])
     photos_ = load_photos([str(p) for p in photos]) if photos else None
     # texture detail follows the image resolution: 8 mm texels at 640 px wide
-    texel = float(np.clip(0.008 * 640 / width, 0.004, 0.02))
+    texel = float(np.clip(0.008 * 640 / width, 0.004, 0.06))
     room = build_room(room_size, seed=seed_, photos=photos_, texel=texel)
     start = np.round(rng.uniform(0.0, spread, V), 6)
     start[rng.integers(0, V)] = 0.0 if V > 1 else start[0]
@@ -1029,7 +1045,9 @@ def render_scene(
             img = np.asarray(head_textures[w])
             if img.ndim != 3 or img.shape[2] != 3 or img.dtype != np.uint8:
                 raise ValueError("head_textures: expected RGB uint8 images (H, W, 3)")
-            tex.append(cv2.resize(img, (64, 80), interpolation=cv2.INTER_AREA))
+            tex.append(
+                np.asarray(cv2.resize(img, (64, 80), interpolation=cv2.INTER_AREA), np.uint8)
+            )
             front = len(tex) - 1
         head_tex.append([front, hair, hair, hair, hair])
     target_tex = [[new_tex(32, 32, 3 + k % 3)] * 5 for k in range(n_t)]
@@ -1049,7 +1067,7 @@ def render_scene(
     total = V * F
     bar = None
     if progress:
-        from tqdm.auto import tqdm
+        from tqdm.auto import tqdm  # type: ignore[import-untyped]
 
         bar = tqdm(total=total, desc="render", unit="frame")
     try:
@@ -1098,6 +1116,7 @@ def render_scene(
                 times: FloatArray = times,
                 renderer: Renderer = renderer,
                 static: _Batch = static,
+                shell: _Batch = shell,
                 maps: Any = maps,
             ) -> Any:
                 for k in range(F):
@@ -1106,7 +1125,7 @@ def render_scene(
                     )
                     img = renderer.render(R[k], C[k], shell, static, renderer.prepare(dyn, 10.0))
                     if maps is not None:
-                        img = cv2.remap(
+                        img = cv2.remap(  # type: ignore[assignment]
                             img, maps[0], maps[1], cv2.INTER_LINEAR, borderMode=cv2.BORDER_REPLICATE
                         )
                     if bar is not None:
@@ -1146,21 +1165,31 @@ def render_scene(
     return RenderedScene(tuple(videos), truth_path, truth, room, time.perf_counter() - t_wall)
 
 
+def shipped_scene() -> Path:
+    """The folder of the rendered scene shipped with socialcam (``SHIPPED_SCENE``: 4
+    wearers × 8 s, 640×480, 30 fps): ``wearer0.mp4`` … ``wearer3.mp4``, ``truth.npz``,
+    ``truth.json``. Regenerate with ``python -m socialcam.synth.render --ship``."""
+    import socialcam.data
+
+    return Path(socialcam.data.__file__).parent / "scene"
+
+
 def _main(argv: Sequence[str] | None = None) -> int:
     import argparse
+    import sys
 
     ap = argparse.ArgumentParser(prog="python -m socialcam.synth.render")
     ap.add_argument(
         "--ship", action="store_true", help="regenerate the scene shipped in socialcam/data/scene/"
     )
-    ap.add_argument("--out", default=None)
+    ap.add_argument("--out", default=None, help="write the shipped scene there instead")
     args = ap.parse_args(argv)
     if args.ship:
-        import socialcam.data
-
-        dest = Path(socialcam.data.__file__).parent / "scene"
-        res = render_scene(dest, **SHIPPED_SCENE)
+        dest = shipped_scene() if args.out is None else Path(args.out)
+        res = render_scene(dest, **SHIPPED_SCENE, progress=sys.stderr.isatty())
         print(f"wrote {len(res.videos)} videos to {dest} in {res.render_seconds:.1f} s")
+    else:
+        ap.print_help()
     return 0
 
 
@@ -1171,7 +1200,7 @@ SHIPPED_SCENE: dict[str, Any] = {
     "fps": 30.0,
     "size": (640, 480),
     "seed": 2026,
-    "crf": 23,
+    "crf": 26,
 }
 
 

@@ -43,9 +43,9 @@ def _colour_noise(rng: np.random.Generator, h: int, w: int) -> npt.NDArray[np.fl
     while max(ch, cw) * 2 <= side:
         ch, cw = ch * 2, cw * 2
         amp *= 0.6
-        cur = cv2.resize(cur, (cw, ch), interpolation=cv2.INTER_LINEAR)
+        cur = np.asarray(cv2.resize(cur, (cw, ch), interpolation=cv2.INTER_LINEAR), np.float32)
         cur += rng.normal(0.0, amp, cur.shape).astype(np.float32)
-    cur = cv2.resize(cur, (w, h), interpolation=cv2.INTER_LINEAR)
+    cur = np.asarray(cv2.resize(cur, (w, h), interpolation=cv2.INTER_LINEAR), np.float32)
     base = rng.uniform(70, 190, 3).astype(np.float32)
     return np.clip(cur + base, 0, 255)
 
@@ -142,7 +142,10 @@ def photo_texture(
     crop = photo[y0 : y0 + ch, x0 : x0 + cw]
     if rng.uniform() < 0.5:
         crop = crop[:, ::-1]
-    crop = cv2.resize(np.ascontiguousarray(crop), (width, height), interpolation=cv2.INTER_AREA)
+    crop = np.asarray(
+        cv2.resize(np.ascontiguousarray(crop), (width, height), interpolation=cv2.INTER_AREA),
+        np.uint8,
+    )
     gain = rng.uniform(0.8, 1.2, 3)
     proc = procedural_texture(height, width, seed=seed + 7919, density=density)
     mixed = 0.6 * crop.astype(np.float32) * gain + 0.4 * proc.astype(np.float32)
@@ -160,7 +163,7 @@ def load_photos(paths: Sequence[str], max_side: int = 1024) -> list[U8Image]:
         s = max_side / max(img.shape[:2])
         if s < 1:
             img = cv2.resize(img, None, fx=s, fy=s, interpolation=cv2.INTER_AREA)
-        out.append(cv2.cvtColor(img, cv2.COLOR_BGR2RGB))
+        out.append(np.asarray(cv2.cvtColor(img, cv2.COLOR_BGR2RGB), np.uint8))
     if not out:
         raise ValueError("photos: no image given")
     return out
