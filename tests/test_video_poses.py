@@ -254,7 +254,7 @@ def test_bad_options(tmp_path):
         KnownDistance("a", 0.0, "b", 1.0, -2.0)
 
 
-@pytest.mark.filterwarnings("ignore:no known_distance:socialcam.sfm.VideoPosesWarning")
+@pytest.mark.filterwarnings("ignore::socialcam.sfm.VideoPosesWarning")
 def test_one_wearer_and_a_wearer_from_another_room(scene, tmp_path, no_vocab_tree):
     """One wearer alone works; a video sharing no view with it (another room) is reported
     as not placed, and the run goes on with the largest model."""
