@@ -56,6 +56,8 @@ from socialcam.geometry import (
     ray_sphere,
     triangulate,
 )
+from socialcam.pipeline import poses
+from socialcam.sfm import VideoReconstruction, reconstruct_videos
 from socialcam.trajectory import (
     Trajectory,
     TrajectoryBatch,
@@ -87,6 +89,7 @@ __all__ = [
     "TrajectoryBatch",
     "TrajectoryOptions",
     "TriangulationInfo",
+    "VideoReconstruction",
     "__version__",
     "align_similarity",
     "articulated_bqp",
@@ -103,11 +106,13 @@ __all__ = [
     "plot_charge_tracks",
     "plot_gaze_field",
     "plot_saliency",
+    "poses",
     "ray_sphere",
     "reconstruct_articulated",
     "reconstruct_skeleton",
     "reconstruct_trajectories",
     "reconstruct_trajectory",
+    "reconstruct_videos",
     "reconstructability",
     "saliency_field",
     "saliency_grid",

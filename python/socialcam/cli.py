@@ -1,4 +1,4 @@
-"""Command line: ``socialcam demo``, ``socialcam render``."""
+"""Command line: ``socialcam demo``, ``socialcam render``, ``socialcam poses``."""
 
 from __future__ import annotations
 
@@ -6,6 +6,7 @@ import argparse
 import json
 import sys
 from collections.abc import Sequence
+from pathlib import Path
 
 from socialcam import __version__
 
@@ -36,6 +37,44 @@ def main(argv: Sequence[str] | None = None) -> int:
     demo.add_argument("--seed", type=int, default=0, help="scene seed (default: %(default)s)")
     demo.add_argument("--no-plots", action="store_true", help="skip PNG plots")
     demo.add_argument("--json", action="store_true", help="print the whole report as JSON")
+    pz = sub.add_parser(
+        "poses",
+        help="camera poses of social-camera videos on one clock (poses.csv, sync.json, "
+        "report.json)",
+    )
+    pz.add_argument("videos", nargs="+", metavar="VIDEO", help="one video per wearer")
+    pz.add_argument("--out", required=True, help="output folder")
+    pz.add_argument(
+        "--fps", type=float, default=10.0, help="output rate, Hz (default: %(default)s)"
+    )
+    pz.add_argument(
+        "--keyframe-fps", type=float, default=2.0, help="keyframe rate, Hz (default: %(default)s)"
+    )
+    pz.add_argument(
+        "--camera-model",
+        default="SIMPLE_RADIAL",
+        help="COLMAP lens model per wearer, e.g. SIMPLE_RADIAL, RADIAL, OPENCV_FISHEYE "
+        "(default: %(default)s)",
+    )
+    pz.add_argument(
+        "--offset",
+        action="append",
+        default=[],
+        metavar="PERSON=SECONDS",
+        help="manual clock offset of a video (repeatable); needed for videos without audio",
+    )
+    pz.add_argument(
+        "--eye-height", type=float, default=None, help="mean camera height above the floor, m"
+    )
+    pz.add_argument(
+        "--known-distance",
+        nargs=5,
+        default=None,
+        metavar=("PERSON_A", "TIME_A", "PERSON_B", "TIME_B", "METRES"),
+        help="distance between two camera centres (persons at common-clock times)",
+    )
+    pz.add_argument("--seed", type=int, default=0, help="random seed (default: %(default)s)")
+    pz.add_argument("--json", action="store_true", help="print the whole report as JSON")
     render = sub.add_parser(
         "render",
         help="render a test scene: first-person videos (mp4, H.264 + AAC) with exact ground truth",
@@ -65,6 +104,8 @@ def main(argv: Sequence[str] | None = None) -> int:
         "--photos", nargs="*", default=None, help="image files to mix into the surface textures"
     )
     args = parser.parse_args(argv)
+    if args.command == "poses":
+        return _poses(parser, args)
     if args.command == "render":
         from socialcam.synth.render import render_scene
 
@@ -103,6 +144,57 @@ def main(argv: Sequence[str] | None = None) -> int:
         )
         print(json.dumps(report, indent=2, default=float) if args.json else _summary(report))
         print(f"report written to {args.out}/report.json")
+    return 0
+
+
+def _poses(parser: argparse.ArgumentParser, args: argparse.Namespace) -> int:
+    from socialcam.pipeline import poses
+
+    offsets: dict[str, float] = {}
+    for item in args.offset:
+        person, sep, value = item.partition("=")
+        try:
+            offsets[person] = float(value)
+        except ValueError:
+            sep = ""
+        if not sep or not person:
+            parser.error(f"--offset: expected PERSON=SECONDS, got {item!r}")
+    known = None
+    if args.known_distance is not None:
+        a, ta, b, tb, m = args.known_distance
+        try:
+            known = (a, float(ta), b, float(tb), float(m))
+        except ValueError:
+            parser.error("--known-distance: times and metres must be numbers")
+    try:
+        rec = poses(
+            args.videos,
+            args.out,
+            fps=args.fps,
+            sync=offsets or None,
+            known_distance=known,
+            eye_height=args.eye_height,
+            keyframe_fps=args.keyframe_fps,
+            camera_model=args.camera_model,
+            seed=args.seed,
+            progress=sys.stderr.isatty(),
+        )
+    except ValueError as exc:
+        print(f"socialcam poses: error: {exc}", file=sys.stderr)
+        return 2
+    report = json.loads((Path(args.out) / "report.json").read_text())
+    if args.json:
+        print(json.dumps(report, indent=2))
+    else:
+        d = rec.to_dict()
+        print(
+            f"posed {d['n_posed']} of {d['n_frames']} frames "
+            f"({100 * d['registered_fraction']:.1f} %), {d['n_points']} map points"
+        )
+        print(", ".join(f"{k} {v:.1f} s" for k, v in d["timings"].items()))
+        for w in d["warnings"]:
+            print(f"warning: {w}", file=sys.stderr)
+    print(f"poses written to {args.out}/poses.csv")
     return 0
 
 

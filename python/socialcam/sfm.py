@@ -7,11 +7,32 @@ of social-camera frames in one world frame (the README's conventions).
 
 from __future__ import annotations
 
+import io
+import json
 import os
 import shutil
-from collections.abc import Callable
+import sys
+import time
+import warnings
+from collections.abc import Callable, Iterator, Mapping, Sequence
+from dataclasses import dataclass, fields, replace
 from pathlib import Path
-from typing import Any, Literal
+from typing import Any, Literal, get_args
+
+import numpy as np
+import numpy.typing as npt
+
+from socialcam._validate import (
+    FloatArray,
+    as_float_array,
+    check_choice,
+    check_float,
+    check_int,
+    check_seed,
+    readonly,
+)
+from socialcam.camera import COLMAP_TO_OPENCV_PIXEL, Cameras
+from socialcam.io import atomic_write_bytes, write_json
 
 CameraModel = Literal["SIMPLE_PINHOLE", "PINHOLE", "SIMPLE_RADIAL", "RADIAL", "OPENCV"]
 
@@ -115,3 +136,1328 @@ def reconstruct_static(
         raise RuntimeError("structure from motion registered no model (too few matches?)")
     best = max(models, key=lambda k: models[k].num_reg_images())
     return sparse / str(best)
+
+
+# =====================================================================================
+# Videos → camera poses of every output frame (issue 9; thesis App. A).
+# =====================================================================================
+
+VideoCameraModel = Literal[
+    "SIMPLE_PINHOLE",
+    "PINHOLE",
+    "SIMPLE_RADIAL",
+    "RADIAL",
+    "OPENCV",
+    "SIMPLE_RADIAL_FISHEYE",
+    "RADIAL_FISHEYE",
+    "OPENCV_FISHEYE",
+]
+
+
+@dataclass(frozen=True)
+class VideoSfmOptions:
+    """Options of :func:`reconstruct_videos` (each validated on construction).
+
+    Attributes
+    ----------
+    fps : output rate: every video is posed at the frames nearest to ``k / fps`` s (local
+        clock), Hz.
+    keyframe_fps : rate of the keyframes given to SIFT + incremental mapping, Hz; rounded so
+        that every keyframe is an output frame (``fps / keyframe_fps`` an integer ≥ 1).
+    camera_model : COLMAP camera model of every wearer's lens (one camera per wearer).
+    max_features : SIFT features per keyframe.
+    sequential_overlap : each keyframe is matched with this many following keyframes of
+        the same video.
+    cross_pairs : each keyframe is matched with its ``cross_pairs`` most similar keyframes in
+        each other video (retrieval by a TF-IDF bag of SIFT words computed here; the
+        vocabulary tree of COLMAP is never used).
+    global_mapping : use COLMAP's global mapper instead of the incremental one.
+    refine_intrinsics : with given ``intrinsics``, let bundle adjustment refine them.
+    min_inliers : fewest PnP inliers for a pose of a frame between keyframes.
+    max_rms : largest reprojection RMS (pixels) of a trusted pose.
+    ransac_px : PnP RANSAC threshold, pixels.
+    max_split : a frame between two keyframes is posed from the tracks of each alone too; if
+        the two centres differ by more than this (metres), it is dropped.
+    max_split_turn : likewise for their rotations, radians (default 1°).
+    max_jump : a frame between keyframes farther than this from the mean of its two
+        neighbours is dropped, metres (a gross-error check: rendered and real heads move
+        up to ~0.4 m from that mean at 10 fps). Without a metric scale, 0.2 of the median
+        keyframe-to-point depth stands for ``max_jump`` (and ``max_split`` in proportion).
+    max_turn : likewise for rotation, radians (default 30°).
+    num_threads : threads for SIFT, matching and mapping.
+    seed : seeds the retrieval vocabulary, the mapper and RANSAC.
+    """
+
+    fps: float = 10.0
+    keyframe_fps: float = 2.0
+    camera_model: VideoCameraModel = "SIMPLE_RADIAL"
+    max_features: int = 2048
+    sequential_overlap: int = 3
+    cross_pairs: int = 3
+    global_mapping: bool = False
+    refine_intrinsics: bool = True
+    min_inliers: int = 25
+    max_rms: float = 2.0
+    ransac_px: float = 2.0
+    max_split: float = 0.03
+    max_split_turn: float = 0.0175
+    max_jump: float = 0.5
+    max_turn: float = 0.524
+    num_threads: int = 2
+    seed: int = 0
+
+    def __post_init__(self) -> None:
+        check_float(self.fps, "fps", min=0.0, min_exclusive=True, max=1000.0)
+        check_float(self.keyframe_fps, "keyframe_fps", min=0.0, min_exclusive=True)
+        if self.keyframe_fps > self.fps:
+            raise ValueError(
+                f"keyframe_fps: must not exceed fps ({self.fps}), got {self.keyframe_fps}"
+            )
+        check_choice(self.camera_model, "camera_model", tuple(get_args(VideoCameraModel)))
+        check_int(self.max_features, "max_features", min=64, max=65536)
+        check_int(self.sequential_overlap, "sequential_overlap", min=1, max=100)
+        check_int(self.cross_pairs, "cross_pairs", min=0, max=100)
+        check_int(self.min_inliers, "min_inliers", min=6)
+        check_float(self.max_rms, "max_rms", min=0.0, min_exclusive=True)
+        check_float(self.ransac_px, "ransac_px", min=0.0, min_exclusive=True)
+        check_float(self.max_split, "max_split", min=0.0, min_exclusive=True)
+        check_float(self.max_split_turn, "max_split_turn", min=0.0, min_exclusive=True)
+        check_float(self.max_jump, "max_jump", min=0.0, min_exclusive=True)
+        check_float(self.max_turn, "max_turn", min=0.0, min_exclusive=True, max=np.pi)
+        check_int(self.num_threads, "num_threads", min=1, max=1024)
+        check_seed(self.seed)
+        for name in ("global_mapping", "refine_intrinsics"):
+            if not isinstance(getattr(self, name), bool):
+                raise ValueError(f"{name}: expected True or False, got {getattr(self, name)!r}")
+
+    @property
+    def keyframe_step(self) -> int:
+        """Output frames per keyframe."""
+        return max(1, round(self.fps / self.keyframe_fps))
+
+
+@dataclass(frozen=True)
+class KnownDistance:
+    """A distance measured in the scene, fixing the metric scale: between the camera centre
+    of ``person_a`` at time ``time_a`` and that of ``person_b`` at ``time_b`` (common clock,
+    seconds; the nearest posed frame is used). Two wearers standing ``metres`` apart at one
+    moment, or one wearer walking a measured baseline, are both of this form."""
+
+    person_a: str
+    time_a: float
+    person_b: str
+    time_b: float
+    metres: float
+
+    def __post_init__(self) -> None:
+        check_float(self.time_a, "known_distance.time_a")
+        check_float(self.time_b, "known_distance.time_b")
+        check_float(self.metres, "known_distance.metres", min=0.0, min_exclusive=True)
+
+
+@dataclass(frozen=True)
+class FrameQuality:
+    """Per output frame of one video: ``times (F,)`` common clock s, ``posed (F,)`` bool,
+    ``keyframe (F,)`` bool, ``rms (F,)`` inlier reprojection RMS px (NaN when unposed),
+    ``n_inliers (F,)``, ``reasons``: frame index → why it was dropped."""
+
+    times: FloatArray
+    posed: npt.NDArray[np.bool_]
+    keyframe: npt.NDArray[np.bool_]
+    rms: FloatArray
+    n_inliers: npt.NDArray[np.int64]
+    reasons: dict[int, str]
+
+    def to_dict(self) -> dict[str, Any]:
+        return {
+            "n_frames": len(self.times),
+            "n_posed": int(self.posed.sum()),
+            "n_keyframes": int(self.keyframe.sum()),
+            "median_rms": float(np.nanmedian(self.rms)) if self.posed.any() else None,
+            "dropped": {str(k): v for k, v in sorted(self.reasons.items())},
+        }
+
+
+@dataclass(frozen=True)
+class VideoReconstruction:
+    """Camera poses of every output frame of every video, in one metric, gravity-aligned
+    world frame (z up; origin on the floor below the first wearer's mean position when the
+    floor was found, else at that position).
+
+    Attributes
+    ----------
+    names : person names (video file stems), in the order given.
+    cameras : person → :class:`~socialcam.Cameras` of its posed frames, ``times`` on the
+        common clock; ``K`` is the pinhole part of the lens and
+        ``Cameras.undistort_points`` maps raw pixels to it. Wearers that could not be placed
+        are absent.
+    quality : person → :class:`FrameQuality` (every output frame, posed or not).
+    points : ``(M, 3)`` static map points, metres. colors : ``(M, 3)`` uint8 RGB.
+    offsets : ``(V,)`` s, ``t_common = t_local + offsets[v]``.
+    sync : the synchronisation result as a dict (offsets, confidence, method).
+    scale : metres per map unit (NaN when no scale was given: the map's own units).
+    unplaced : persons with no pose in the largest model.
+    timings : stage → wall seconds. warnings : what a user should know.
+    out_dir : where it is saved (``load`` reads it back).
+    """
+
+    names: tuple[str, ...]
+    cameras: dict[str, Cameras]
+    quality: dict[str, FrameQuality]
+    points: FloatArray
+    colors: npt.NDArray[np.uint8]
+    offsets: FloatArray
+    sync: dict[str, Any]
+    scale: float
+    unplaced: tuple[str, ...]
+    timings: dict[str, float]
+    warnings: tuple[str, ...]
+    counts: dict[str, Any]
+    out_dir: Path
+
+    def to_dict(self) -> dict[str, Any]:
+        """Plain JSON-able summary (no per-frame poses)."""
+        n = sum(len(q.times) for q in self.quality.values())
+        posed = sum(int(q.posed.sum()) for q in self.quality.values())
+        return {
+            "names": list(self.names),
+            "registered_fraction": posed / n if n else 0.0,
+            "n_frames": n,
+            "n_posed": posed,
+            "n_points": len(self.points),
+            "scale": self.scale,
+            "offsets": self.offsets.tolist(),
+            "sync": self.sync,
+            "unplaced": list(self.unplaced),
+            "timings": dict(self.timings),
+            "warnings": list(self.warnings),
+            "counts": dict(self.counts),
+            "quality": {k: q.to_dict() for k, q in self.quality.items()},
+        }
+
+    def save(self) -> Path:
+        """Writes ``reconstruction.npz`` + ``reconstruction.json`` into ``out_dir``."""
+        arrays: dict[str, np.ndarray] = {
+            "points": self.points,
+            "colors": self.colors,
+            "offsets": self.offsets,
+        }
+        for i, name in enumerate(self.names):
+            q = self.quality[name]
+            for k in ("times", "posed", "keyframe", "rms", "n_inliers"):
+                arrays[f"{i}_{k}"] = getattr(q, k)
+            if name in self.cameras:
+                c = self.cameras[name]
+                arrays[f"{i}_R"], arrays[f"{i}_C"], arrays[f"{i}_K"] = c.R, c.C, c.K
+        buf = io.BytesIO()
+        np.savez(buf, **arrays)  # type: ignore[arg-type]
+        atomic_write_bytes(self.out_dir / "reconstruction.npz", buf.getvalue())
+        meta = self.to_dict()
+        meta["reasons"] = {
+            name: {str(k): v for k, v in self.quality[name].reasons.items()} for name in self.names
+        }
+        write_json(self.out_dir / "reconstruction.json", meta)
+        return self.out_dir
+
+    @classmethod
+    def load(cls, out_dir: str | os.PathLike[str]) -> VideoReconstruction:
+        """Reads what :meth:`save` (and :func:`reconstruct_videos`) wrote; nothing is
+        recomputed. The lens of each wearer comes from the COLMAP model in ``model/``."""
+        import pycolmap
+
+        out = Path(out_dir)
+        meta_p, npz_p = out / "reconstruction.json", out / "reconstruction.npz"
+        if not meta_p.is_file() or not npz_p.is_file():
+            raise ValueError(f"out_dir: {out} holds no saved video reconstruction")
+        meta = json.loads(meta_p.read_text())
+        lenses: dict[str, Any] = {}
+        if (out / "model").is_dir():
+            rec = pycolmap.Reconstruction(str(out / "model"))
+            for img in rec.images.values():
+                lenses.setdefault(img.name.split("/")[0], rec.cameras[img.camera_id])
+        cameras: dict[str, Cameras] = {}
+        quality: dict[str, FrameQuality] = {}
+        with np.load(npz_p) as z:
+            names = tuple(meta["names"])
+            for i, name in enumerate(names):
+                q = {k: z[f"{i}_{k}"] for k in ("times", "posed", "keyframe", "rms", "n_inliers")}
+                reasons = {int(k): v for k, v in meta["reasons"][name].items()}
+                quality[name] = FrameQuality(reasons=reasons, **q)
+                if f"{i}_R" in z:
+                    cam = Cameras(z[f"{i}_K"], z[f"{i}_R"], z[f"{i}_C"], q["times"][q["posed"]])
+                    if name in lenses:
+                        cam._colmap = [lenses[name]] * len(cam)
+                    cameras[name] = cam
+            points, colors, offsets = z["points"], z["colors"], z["offsets"]
+        return cls(
+            names=names,
+            cameras=cameras,
+            quality=quality,
+            points=readonly(points),
+            colors=readonly(colors),
+            offsets=readonly(offsets),
+            sync=meta["sync"],
+            scale=float("nan") if meta["scale"] is None else float(meta["scale"]),
+            unplaced=tuple(meta["unplaced"]),
+            timings=meta["timings"],
+            warnings=tuple(meta["warnings"]),
+            counts=meta["counts"],
+            out_dir=out,
+        )
+
+
+def _silence_glog() -> None:
+    """COLMAP logs thousands of lines through glog (STACK.md): keep warnings and errors."""
+    import pycolmap
+
+    logging = getattr(pycolmap, "logging", None)
+    if logging is not None:
+        for attr, value in (("minloglevel", 2), ("stderrthreshold", 2), ("verbose_level", 0)):
+            if hasattr(logging, attr):
+                setattr(logging, attr, value)
+    os.environ.setdefault("GLOG_minloglevel", "2")
+
+
+def _options(options: VideoSfmOptions | None, overrides: dict[str, Any]) -> VideoSfmOptions:
+    base = VideoSfmOptions() if options is None else options
+    if not isinstance(base, VideoSfmOptions):
+        raise ValueError(f"options: expected VideoSfmOptions, got {type(base).__name__}")
+    names = {f.name for f in fields(VideoSfmOptions)}
+    for k in overrides:
+        if k not in names:
+            raise ValueError(f"{k}: not an option of reconstruct_videos ({sorted(names)})")
+    return replace(base, **overrides) if overrides else base
+
+
+def _resolve_sync(vids: list[Any], sync: Any) -> tuple[FloatArray, dict[str, Any]]:
+    """Offsets ``(V,)`` on the common clock (``offsets[0] == 0``) and their description."""
+    names = [v.info.name for v in vids]
+    if sync is None:
+        if len(vids) == 1:
+            return np.zeros(1), {
+                "names": names,
+                "offsets": [0.0],
+                "confidence": [1.0],
+                "method": ["reference"],
+            }
+        silent = [str(v.info.path) for v in vids if not v.info.has_audio]
+        if silent:
+            raise ValueError(
+                f"sync: {', '.join(silent)} has no audio track, so the videos cannot be "
+                "synchronised from sound; pass manual offsets, e.g. "
+                "sync={'" + names[0] + "': 0.0, ...} (seconds added to each video's local "
+                "clock)"
+            )
+        from socialcam.sync import synchronize
+
+        res = synchronize(vids)
+    elif isinstance(sync, Mapping):
+        given = {str(k): float(v) for k, v in sync.items()}
+        unknown = sorted(set(given) - set(names))
+        if unknown:
+            raise ValueError(f"sync: no video named {unknown} (names are {names})")
+        if set(given) >= set(names):
+            off = np.array([given[n] for n in names]) - given[names[0]]
+            return off, {
+                "names": names,
+                "offsets": off.tolist(),
+                "confidence": [1.0] * len(names),
+                "method": ["reference"] + ["manual"] * (len(names) - 1),
+            }
+        from socialcam.sync import synchronize
+
+        res = synchronize(vids, manual_offsets=given)
+    elif hasattr(sync, "offsets") and hasattr(sync, "names"):
+        res = sync
+    else:
+        raise ValueError(
+            f"sync: expected None, a SyncResult or a mapping name → offset, got {type(sync).__name__}"
+        )
+    if tuple(res.names) != tuple(names):
+        raise ValueError(f"sync: names {list(res.names)} do not match the videos {names}")
+    off = np.asarray(res.offsets, dtype=np.float64)
+    n = len(names)
+    conf = getattr(res, "confidence", None)
+    method = getattr(res, "method", None)
+    d = {
+        "names": names,
+        "offsets": off.tolist(),
+        "confidence": [None] * n if conf is None else [float(c) for c in conf],
+        "method": [None] * n if method is None else [str(m) for m in method],
+    }
+    return off, d
+
+
+_PINHOLE_PARAMS = {
+    # COLMAP parameter order; "f" = mean focal, "fx", "fy", "cx", "cy", then distortion.
+    "SIMPLE_PINHOLE": ("f", "cx", "cy"),
+    "PINHOLE": ("fx", "fy", "cx", "cy"),
+    "SIMPLE_RADIAL": ("f", "cx", "cy"),
+    "RADIAL": ("f", "cx", "cy"),
+    "OPENCV": ("fx", "fy", "cx", "cy"),
+    "SIMPLE_RADIAL_FISHEYE": ("f", "cx", "cy"),
+    "RADIAL_FISHEYE": ("f", "cx", "cy"),
+    "OPENCV_FISHEYE": ("fx", "fy", "cx", "cy"),
+}
+_N_DIST = {
+    "SIMPLE_PINHOLE": 0,
+    "PINHOLE": 0,
+    "SIMPLE_RADIAL": 1,
+    "RADIAL": 2,
+    "OPENCV": 4,
+    "SIMPLE_RADIAL_FISHEYE": 1,
+    "RADIAL_FISHEYE": 2,
+    "OPENCV_FISHEYE": 4,
+}
+
+
+def _colmap_params(model: str, K: FloatArray, dist: Sequence[float], who: str) -> list[float]:
+    """COLMAP parameters of ``model`` from an OpenCV-convention ``K`` and the distortion
+    coefficients in COLMAP order (SIMPLE_RADIAL: k; RADIAL: k1 k2; OPENCV: k1 k2 p1 p2;
+    OPENCV_FISHEYE: k1..k4)."""
+    if len(dist) != _N_DIST[model]:
+        raise ValueError(
+            f"intrinsics: {who}: {model} takes {_N_DIST[model]} distortion coefficients, "
+            f"got {len(dist)}"
+        )
+    vals = {
+        "f": (K[0, 0] + K[1, 1]) / 2,
+        "fx": K[0, 0],
+        "fy": K[1, 1],
+        "cx": K[0, 2] - COLMAP_TO_OPENCV_PIXEL,
+        "cy": K[1, 2] - COLMAP_TO_OPENCV_PIXEL,
+    }
+    return [float(vals[k]) for k in _PINHOLE_PARAMS[model]] + [float(d) for d in dist]
+
+
+def _resolve_intrinsics(intrinsics: Any, names: list[str], model: str) -> dict[str, list[float]]:
+    """``intrinsics`` (None, a sequence per video or a mapping name → ``(K, dist)``) as
+    COLMAP parameters per person."""
+    if intrinsics is None:
+        return {}
+    if isinstance(intrinsics, Mapping):
+        unknown = sorted(set(map(str, intrinsics)) - set(names))
+        if unknown:
+            raise ValueError(f"intrinsics: no video named {unknown} (names are {names})")
+        items = {str(k): v for k, v in intrinsics.items()}
+    else:
+        seq = list(intrinsics)
+        if len(seq) != len(names):
+            raise ValueError(f"intrinsics: expected {len(names)} entries, got {len(seq)}")
+        items = dict(zip(names, seq, strict=True))
+    out = {}
+    for name, value in items.items():
+        if value is None:
+            continue
+        try:
+            K, dist = value
+        except (TypeError, ValueError):
+            raise ValueError(f"intrinsics: {name}: expected a pair (K, dist)") from None
+        Km = as_float_array(K, f"intrinsics[{name}].K", (3, 3))
+        d = as_float_array(dist, f"intrinsics[{name}].dist", (None,))
+        if Km[0, 0] <= 0 or Km[1, 1] <= 0:
+            raise ValueError(f"intrinsics: {name}: focal lengths must be positive")
+        out[name] = _colmap_params(model, Km, list(d), name)
+    return out
+
+
+def _retrieval_pairs(
+    db_path: Path,
+    by_video: list[list[tuple[int, str]]],
+    overlap: int,
+    cross: int,
+    seed: int,
+) -> list[tuple[str, str]]:
+    """Keyframe pairs to match: ``overlap`` following keyframes in the same video, and the
+    ``cross`` most similar keyframes in each other video by a TF-IDF bag of SIFT words
+    (a small vocabulary k-means'd here from the keyframes' own descriptors)."""
+    import cv2
+    import pycolmap
+
+    pairs: set[tuple[str, str]] = set()
+    for kfs in by_video:
+        for i in range(len(kfs)):
+            for j in range(i + 1, min(len(kfs), i + 1 + overlap)):
+                pairs.add((kfs[i][1], kfs[j][1]))
+    if cross == 0 or len(by_video) < 2:
+        return sorted(pairs)
+    flat = [(v, iid, name) for v, kfs in enumerate(by_video) for iid, name in kfs]
+    db = pycolmap.Database.open(str(db_path))
+    try:
+        desc = [_descriptors(db.read_descriptors(iid)) for _, iid, _ in flat]
+    finally:
+        db.close()
+    rng = np.random.default_rng(seed)
+    pool = np.concatenate([d for d in desc if len(d)]) if any(len(d) for d in desc) else None
+    if pool is None or len(pool) < 512:
+        return sorted(pairs)
+    sample = pool[rng.choice(len(pool), size=min(len(pool), 10000), replace=False)]
+    n_words = 200
+    cv2.setRNGSeed(seed)
+    _, _, centres = cv2.kmeans(  # type: ignore[call-overload]
+        sample,
+        n_words,
+        None,
+        (cv2.TERM_CRITERIA_MAX_ITER | cv2.TERM_CRITERIA_EPS, 6, 1.0),
+        1,
+        cv2.KMEANS_PP_CENTERS,
+    )
+    c2 = (centres**2).sum(axis=1)
+    hist = np.zeros((len(flat), n_words))
+    for i, d in enumerate(desc):
+        if len(d):
+            words = np.argmin(c2[None, :] - 2.0 * d @ centres.T, axis=1)
+            hist[i] = np.bincount(words, minlength=n_words)
+    df = (hist > 0).sum(axis=0)
+    idf = np.log(len(flat) / np.maximum(df, 1))
+    tf = hist / np.maximum(hist.sum(axis=1, keepdims=True), 1)
+    vec = tf * idf
+    vec /= np.maximum(np.linalg.norm(vec, axis=1, keepdims=True), 1e-12)
+    sim = vec @ vec.T
+    video = np.array([v for v, _, _ in flat])
+    for i in range(len(flat)):
+        for other in range(len(by_video)):
+            if other == video[i]:
+                continue
+            s = np.where(video == other, sim[i], -np.inf)
+            for j in np.argsort(-s, kind="stable")[:cross]:
+                if np.isfinite(s[j]):
+                    a, b = sorted((flat[i][2], flat[j][2]))
+                    pairs.add((a, b))
+    return sorted(pairs)
+
+
+def _descriptors(d: Any) -> npt.NDArray[np.float32]:
+    """A keyframe's SIFT descriptors ``(N, 128)`` as float32 (pycolmap 4 wraps them)."""
+    raw = d.data if hasattr(d, "data") else d
+    return np.ascontiguousarray(np.asarray(raw), dtype=np.float32).reshape(-1, 128)
+
+
+def _gravity_rotation(up: FloatArray) -> FloatArray:
+    """Rotation taking the unit vector ``up`` to +z (the smallest such rotation)."""
+    z = np.array([0.0, 0.0, 1.0])
+    v = np.cross(up, z)
+    c = float(up @ z)
+    if np.linalg.norm(v) < 1e-12:
+        return np.eye(3) if c > 0 else np.diag([1.0, -1.0, -1.0])
+    vx = np.array([[0, -v[2], v[1]], [v[2], 0, -v[0]], [-v[1], v[0], 0]])
+    return np.eye(3) + vx + vx @ vx / (1 + c)
+
+
+def _floor_height(points: FloatArray, cam_heights: FloatArray, seed: int) -> float | None:
+    """Height (along +z) of the floor: the densest horizontal layer of map points well below
+    every camera, or ``None`` when there are too few points there."""
+    if len(points) == 0 or len(cam_heights) == 0:
+        return None
+    lowest_cam = float(np.min(cam_heights))
+    spread = float(np.ptp(cam_heights)) + 1e-9
+    h = points[:, 2]
+    below = h[h < lowest_cam - 0.5 * (np.median(cam_heights) - np.min(h))]
+    if len(below) < 30:
+        return None
+    # Densest thin slab (width 2 % of the camera-to-lowest-point range).
+    width = max(0.02 * (lowest_cam - float(np.min(h))), 1e-3 * spread)
+    hs = np.sort(below)
+    counts = np.searchsorted(hs, hs + width) - np.arange(len(hs))
+    k = int(np.argmax(counts))
+    if counts[k] < 30:
+        return None
+    slab = hs[k : k + counts[k]]
+    return float(np.median(slab))
+
+
+def _quat_wxyz(R: FloatArray) -> FloatArray:
+    """Unit quaternions ``(N, 4)`` (w, x, y, z; w ≥ 0) of rotations ``(N, 3, 3)``."""
+    from scipy.spatial.transform import Rotation  # type: ignore[import-untyped]
+
+    q = Rotation.from_matrix(R).as_quat()  # x, y, z, w
+    q = np.c_[q[:, 3], q[:, :3]]
+    q[q[:, 0] < 0] *= -1
+    return q
+
+
+def _neighbour_outliers(
+    idx: npt.NDArray[np.int64], C: FloatArray, R: FloatArray, jump: float, turn: float
+) -> npt.NDArray[np.bool_]:
+    """Posed frames (output indices ``idx``, centres ``C (N, 3)``, rotations ``R (N, 3, 3)``)
+    that disagree with both temporal neighbours: centre farther than ``jump`` from the mean
+    of the previous and next posed frames, or rotation more than ``turn`` radians from
+    their mean; frames at the ends compare with the one neighbour they have (``2 jump``)."""
+    n = len(idx)
+    bad = np.zeros(n, bool)
+    if n < 3:
+        return bad
+    for i in range(n):
+        nb = [j for j in (i - 1, i + 1) if 0 <= j < n and abs(int(idx[j]) - int(idx[i])) <= 2]
+        if not nb:
+            continue
+        c_ref = C[nb].mean(axis=0)
+        u, _, vt = np.linalg.svd(R[nb].sum(axis=0))
+        R_ref = u @ vt
+        ang = np.arccos(np.clip((np.trace(R[i] @ R_ref.T) - 1) / 2, -1.0, 1.0))
+        lim = jump if len(nb) == 2 else 2 * jump
+        if np.linalg.norm(C[i] - c_ref) > lim or ang > (turn if len(nb) == 2 else 2 * turn):
+            bad[i] = True
+    return bad
+
+
+def reconstruct_videos(
+    videos: Sequence[str | os.PathLike[str]],
+    *,
+    out_dir: str | os.PathLike[str],
+    sync: Any = None,
+    intrinsics: Any = None,
+    known_distance: KnownDistance | tuple[str, float, str, float, float] | None = None,
+    eye_height: float | None = None,
+    options: VideoSfmOptions | None = None,
+    progress: bool = True,
+    **overrides: Any,
+) -> VideoReconstruction:
+    """Camera poses of every output frame of social-camera videos, on one clock, in one
+    metric, gravity-aligned world frame (thesis App. A).
+
+    Keyframes (``keyframe_fps``) go through SIFT, sequential matching inside each video,
+    matching across videos between retrieved similar keyframes, and incremental mapping
+    (pycolmap, CPU; one camera model per wearer). Every output frame (``fps``) between
+    keyframes is then posed by tracking the previous keyframe's map points (KLT) and PnP;
+    a frame whose pose cannot be trusted (too few inliers, reprojection RMS above
+    ``max_rms``, disagreement with its neighbours) is dropped with its reason.
+
+    Parameters
+    ----------
+    videos : video files (or folders of numbered frames); the file stem names the person.
+    out_dir : working folder (keyframes, COLMAP database and model, our npz/json). Its saved
+        result is reloaded by :meth:`VideoReconstruction.load`.
+    sync : ``None`` (synchronise from the audio; one video needs none), a
+        ``socialcam.sync.SyncResult``, or a mapping person → offset in seconds
+        (``t_common = t_local + offset``; missing persons are synchronised from audio).
+    intrinsics : ``None`` (self-calibrate), or per video (sequence, or mapping person →)
+        ``(K (3, 3) OpenCV pixels, dist)`` with ``dist`` the distortion coefficients of
+        ``camera_model`` in COLMAP order. Refined by bundle adjustment unless
+        ``refine_intrinsics=False``; a warning says when they look wrong.
+    known_distance : a :class:`KnownDistance` (or its 5 fields as a tuple) fixing the scale.
+    eye_height : mean height of the cameras above the floor, metres (the floor is the
+        densest horizontal layer of map points below the cameras). Ignored with
+        ``known_distance``. Without either, the map's own (arbitrary) unit is kept.
+    options, **overrides : :class:`VideoSfmOptions` and field overrides (``fps``,
+        ``keyframe_fps``, ``camera_model``, ``global_mapping``, ``seed``, ...).
+    progress : show progress bars on stderr.
+
+    Returns
+    -------
+    VideoReconstruction
+        Saved in ``out_dir`` (``model/`` COLMAP model in the world frame,
+        ``reconstruction.npz``, ``reconstruction.json``).
+
+    Raises
+    ------
+    ValueError
+        A file that is not a video, videos without audio and no manual offsets, bad
+        options, no model at all — naming the file or argument and what to do.
+    """
+    import pycolmap
+    from tqdm import tqdm  # type: ignore[import-untyped]
+
+    from socialcam.video import open_video
+
+    opts = _options(options, overrides)
+    if isinstance(videos, (str, os.PathLike)) or not isinstance(videos, Sequence):
+        raise ValueError("videos: expected a sequence of video paths")
+    if len(videos) == 0:
+        raise ValueError("videos: no video given")
+    if known_distance is not None and not isinstance(known_distance, KnownDistance):
+        try:
+            known_distance = KnownDistance(*known_distance)
+        except TypeError:
+            raise ValueError(
+                "known_distance: expected KnownDistance(person_a, time_a, person_b, time_b, metres)"
+            ) from None
+    if eye_height is not None:
+        eye_height = check_float(eye_height, "eye_height", min=0.0, min_exclusive=True)
+    _silence_glog()
+    timings: dict[str, float] = {}
+    warns: list[str] = []
+    clock = time.perf_counter()
+
+    def lap(stage: str) -> None:
+        nonlocal clock
+        now = time.perf_counter()
+        timings[stage] = timings.get(stage, 0.0) + now - clock
+        clock = now
+
+    vids = [open_video(Path(p)) for p in videos]
+    names = [v.info.name for v in vids]
+    if len(set(names)) != len(names):
+        raise ValueError(f"videos: two videos share a file stem (person name): {names}")
+    if known_distance is not None:
+        for who in (known_distance.person_a, known_distance.person_b):
+            if who not in names:
+                raise ValueError(f"known_distance: no video named {who!r} (names are {names})")
+    own_k = _resolve_intrinsics(intrinsics, names, opts.camera_model)
+    offsets, sync_info = _resolve_sync(vids, sync)
+    for name, conf in zip(names, sync_info.get("confidence", []), strict=False):
+        if conf is not None and float(conf) < 0.5:
+            warns.append(f"{name}: synchronisation confidence {float(conf):.2f} is low")
+    lap("sync")
+
+    out = Path(out_dir)
+    out.mkdir(parents=True, exist_ok=True)
+    kf_root = out / "keyframes"
+    if kf_root.exists():
+        shutil.rmtree(kf_root)
+    step = opts.keyframe_step
+    local_times: list[list[float]] = []
+    kf_names: list[list[str]] = []
+    bar = tqdm(total=len(vids), desc="keyframes", unit="video", disable=not progress)
+    for person, vid in zip(names, vids, strict=True):
+        (kf_root / person).mkdir(parents=True)
+        times: list[float] = []
+        kfs: list[str] = []
+        for k, fr in enumerate(_decoded(vid, opts.fps, gray=False)):
+            if isinstance(fr, Exception):  # a decoder error ends this video, not the run
+                warns.append(
+                    f"{vid.info.path}: decoding stopped after {len(times)} output frames "
+                    f"({type(fr).__name__}: {fr}); later frames are not posed"
+                )
+                break
+            times.append(float(fr.time))
+            if k % step == 0 and _usable(fr.image):
+                kf_name = f"{person}/{k:06d}.png"
+                _write_png(kf_root / kf_name, fr.image)
+                kfs.append(kf_name)
+        local_times.append(times)
+        kf_names.append(kfs)
+        bar.update(1)
+    bar.close()
+    lap("decode keyframes")
+
+    db_path = out / "database.db"
+    if db_path.exists():
+        db_path.unlink()
+    reader = pycolmap.ImageReaderOptions()
+    reader.camera_model = opts.camera_model
+    extraction = pycolmap.FeatureExtractionOptions()
+    extraction.num_threads = opts.num_threads
+    extraction.sift.max_num_features = opts.max_features
+    with _quiet(progress, "SIFT on keyframes"):
+        pycolmap.extract_features(
+            db_path,
+            kf_root,
+            camera_mode=pycolmap.CameraMode.PER_FOLDER,
+            reader_options=reader,
+            extraction_options=extraction,
+            device=pycolmap.Device.cpu,
+        )
+    db = pycolmap.Database.open(str(db_path))
+    try:
+        images = {img.name: img for img in db.read_all_images()}
+        if own_k:
+            done: set[int] = set()
+            for img in images.values():
+                person = img.name.split("/")[0]
+                if person in own_k and img.camera_id not in done:
+                    cam = db.read_camera(img.camera_id)
+                    cam.params = own_k[person]
+                    cam.has_prior_focal_length = True
+                    db.update_camera(cam)
+                    done.add(img.camera_id)
+    finally:
+        db.close()
+    lap("features")
+
+    by_video = [[(images[n].image_id, n) for n in kfs if n in images] for kfs in kf_names]
+    pairs = _retrieval_pairs(
+        db_path, by_video, opts.sequential_overlap, opts.cross_pairs, opts.seed
+    )
+    pair_file = out / "pairs.txt"
+    pair_file.write_text("".join(f"{a} {b}\n" for a, b in pairs))
+    lap("retrieval")
+    matching = pycolmap.FeatureMatchingOptions()
+    matching.num_threads = opts.num_threads
+    pairing = pycolmap.ImportedPairingOptions()
+    pairing.match_list_path = str(pair_file)
+    with _quiet(progress, f"matching {len(pairs)} keyframe pairs"):
+        pycolmap.match_image_pairs(
+            db_path,
+            matching_options=matching,
+            pairing_options=pairing,
+            device=pycolmap.Device.cpu,
+        )
+    lap("matching")
+
+    sparse = out / "sparse"
+    if sparse.exists():
+        shutil.rmtree(sparse)
+    sparse.mkdir()
+    with _quiet(progress, "mapping keyframes"):
+        models = _map(
+            db_path, kf_root, sparse, opts, fixed=bool(own_k) and not opts.refine_intrinsics
+        )
+    if not models:
+        raise ValueError(
+            "videos: no 3D model could be built from the keyframes (too little texture or "
+            "overlap); try a higher keyframe_fps or more max_features"
+        )
+    best = max(models, key=lambda k: models[k].num_reg_images())
+    rec = models[best]
+    lap("mapping")
+
+    # ---- which wearers are in the model, and their lenses
+    # A registered keyframe must observe enough map points: pycolmap can leave an image
+    # "registered" with no observation and a pose far away (seen: 300 units off).
+    reg = {
+        img.name: img
+        for img in rec.images.values()
+        if img.has_pose and img.num_points3D >= opts.min_inliers
+    }
+    n_bad_kf = sum(1 for img in rec.images.values() if img.has_pose) - len(reg)
+    lens: dict[str, Any] = {}
+    for img in reg.values():
+        lens.setdefault(img.name.split("/")[0], rec.cameras[img.camera_id])
+    unplaced = tuple(n for n in names if n not in lens)
+    for n in unplaced:
+        others = [
+            k
+            for k in models
+            if k != best and any(i.name.startswith(n + "/") for i in models[k].images.values())
+        ]
+        where = " (it forms a separate model: it shares no view with the others)" if others else ""
+        warns.append(
+            f"{n}: could not be placed in the largest model{where}; its frames are not posed"
+        )
+    for n, params in own_k.items():
+        if n in lens:
+            f0 = params[0]
+            f1 = float(lens[n].params[0])
+            if abs(f1 - f0) > 0.05 * f0:
+                warns.append(
+                    f"{n}: the given intrinsics look wrong (focal {f0:.1f} px, the videos "
+                    f"say {f1:.1f} px); the poses are not to be trusted: rerun with "
+                    "intrinsics=None to self-calibrate"
+                    if opts.refine_intrinsics
+                    else f"{n}: the given intrinsics look wrong (focal {f0:.1f} px)"
+                )
+    if own_k and not opts.refine_intrinsics:
+        err = float(rec.compute_mean_reprojection_error())
+        if err > 1.0:
+            warns.append(
+                f"mean keyframe reprojection error {err:.2f} px with the given (fixed) "
+                "intrinsics: they may be wrong; rerun with refine_intrinsics=True"
+            )
+
+    # ---- every output frame: keyframes from the mapper, the rest by KLT + PnP
+    quality: dict[str, FrameQuality] = {}
+    raw_R: dict[str, FloatArray] = {}
+    raw_t: dict[str, FloatArray] = {}
+    splits: dict[str, FloatArray] = {}
+    total = sum(len(t) for n, t in zip(names, local_times, strict=True) if n in lens)
+    bar = tqdm(total=total, desc="posing frames", unit="frame", disable=not progress)
+    for v, (name, vid) in enumerate(zip(names, vids, strict=True)):
+        F = len(local_times[v])
+        Rs = np.full((F, 3, 3), np.nan)
+        ts = np.full((F, 3), np.nan)
+        rms = np.full(F, np.nan)
+        n_inl = np.zeros(F, np.int64)
+        is_kf = np.zeros(F, bool)
+        reasons: dict[int, str] = {}
+        splits[name] = np.full((F, 2), np.nan)
+        if name not in lens:
+            reasons = dict.fromkeys(range(F), "wearer not placed in the model")
+        else:
+            problem = _pose_video(
+                vid,
+                name,
+                F,
+                rec,
+                reg,
+                lens[name],
+                opts,
+                bar,
+                Rs,
+                ts,
+                rms,
+                n_inl,
+                is_kf,
+                reasons,
+                splits[name],
+            )
+            if problem:
+                warns.append(problem)
+        raw_R[name], raw_t[name] = Rs, ts
+        quality[name] = FrameQuality(
+            times=readonly(np.asarray(local_times[v], dtype=np.float64) + offsets[v]),
+            posed=np.isfinite(Rs[:, 0, 0]),
+            keyframe=is_kf,
+            rms=rms,
+            n_inliers=n_inl,
+            reasons=reasons,
+        )
+    bar.close()
+    for vid in vids:
+        if hasattr(vid, "close"):
+            vid.close()
+    lap("posing frames")
+
+    cent: dict[str, FloatArray] = {
+        name: -np.einsum("fji,fj->fi", np.nan_to_num(raw_R[name]), np.nan_to_num(raw_t[name]))
+        for name in lens
+    }
+
+    # ---- world frame: gravity from the mean camera "up", metric scale
+    kf_R = np.array(
+        [
+            (
+                img.cam_from_world() if callable(img.cam_from_world) else img.cam_from_world
+            ).rotation.matrix()
+            for img in reg.values()
+        ]
+    )
+    up = -kf_R[:, 1, :].mean(axis=0)
+    up /= np.linalg.norm(up)
+    G = _gravity_rotation(up)
+    ids = sorted(rec.points3D)
+    pts_m = np.array([rec.points3D[i].xyz for i in ids]).reshape(-1, 3)
+    cols = np.array([rec.points3D[i].color for i in ids], dtype=np.uint8).reshape(-1, 3)
+    kf_C = np.array([img.projection_center() for img in reg.values()])
+    first = next(n for n in names if n in lens)
+    first_C = np.array(
+        [img.projection_center() for img in reg.values() if img.name.startswith(first + "/")]
+    )
+    g_pts = pts_m @ G.T
+    g_cams = kf_C @ G.T
+    floor = _floor_height(g_pts, g_cams[:, 2], opts.seed)
+    scale = float("nan")
+    if known_distance is not None:
+        ca = _centre_at(known_distance.person_a, known_distance.time_a, quality, cent, opts.fps)
+        cb = _centre_at(known_distance.person_b, known_distance.time_b, quality, cent, opts.fps)
+        d = float(np.linalg.norm(ca - cb))
+        if d <= 0:
+            raise ValueError("known_distance: the two camera centres coincide in the map")
+        scale = known_distance.metres / d
+    elif eye_height is not None:
+        if floor is None:
+            warns.append(
+                "eye_height: no floor found among the map points; the map's own unit is kept (give known_distance instead)"
+            )
+        else:
+            scale = eye_height / float(np.mean(g_cams[:, 2]) - floor)
+    else:
+        warns.append("no known_distance or eye_height: poses are in the map's own unit, not metres")
+    s = 1.0 if not np.isfinite(scale) else scale
+
+    # ---- neighbour check: a frame between keyframes whose pose jumps away from both its
+    # neighbours (more than max_jump metres, or 2 % of the median keyframe-to-point depth
+    # without a metric scale; or more than max_turn) is dropped.
+    if np.isfinite(scale):
+        jump = opts.max_jump / s
+    else:
+        depth = [
+            np.median(
+                np.linalg.norm(_keyframe_observations(rec, im)[1] - im.projection_center(), axis=1)
+            )
+            for im in list(reg.values())[:: max(1, len(reg) // 20)]
+        ]
+        jump = 0.2 * float(np.median(depth))
+    for name in lens:
+        q = quality[name]
+        sp = splits[name]
+        with np.errstate(invalid="ignore"):
+            split_bad = q.posed & (
+                (sp[:, 0] > jump * opts.max_split / opts.max_jump)
+                | (sp[:, 1] > opts.max_split_turn)
+            )
+        for k in map(int, np.flatnonzero(split_bad)):
+            q.reasons[int(k)] = (
+                f"the tracks of the keyframes before and after disagree ({sp[k, 0] * s:.3g} "
+                f"{'m' if np.isfinite(scale) else 'map units'}, {np.degrees(sp[k, 1]):.2f}°)"
+            )
+            q.posed[k] = False
+            q.rms[k] = np.nan
+        idx = np.flatnonzero(q.posed)
+        bad = _neighbour_outliers(idx, cent[name][idx], raw_R[name][idx], jump, opts.max_turn)
+        bad &= ~q.keyframe[idx]
+        for k in idx[bad]:
+            q.reasons[int(k)] = "jumps away from both neighbours"
+            q.posed[k] = False
+            q.rms[k] = np.nan
+    origin = (first_C @ G.T).mean(axis=0)
+    if floor is not None:
+        origin[2] = floor
+    # X_world = s G X_map + t
+    tvec = -s * origin
+    world_pts = s * g_pts + tvec
+
+    cameras: dict[str, Cameras] = {}
+    for name in lens:
+        q = quality[name]
+        idx = np.flatnonzero(q.posed)
+        Rw = raw_R[name][idx] @ G.T
+        Cw = s * cent[name][idx] @ G.T + tvec
+        K = np.asarray(lens[name].calibration_matrix(), dtype=np.float64).copy()
+        K[0, 2] += COLMAP_TO_OPENCV_PIXEL
+        K[1, 2] += COLMAP_TO_OPENCV_PIXEL
+        posed_cams = Cameras(K, Rw, Cw, q.times[idx])
+        posed_cams._colmap = [lens[name]] * len(idx)
+        cameras[name] = posed_cams
+    sim = pycolmap.Sim3d(s, pycolmap.Rotation3d(G), tvec)
+    rec.transform(sim)
+    model_dir = out / "model"
+    if model_dir.exists():
+        shutil.rmtree(model_dir)
+    model_dir.mkdir()
+    rec.write(str(model_dir))
+    lap("world frame")
+
+    n_frames = sum(len(q.times) for q in quality.values())
+    n_posed = sum(int(q.posed.sum()) for q in quality.values())
+    counts = {
+        "keyframes": sum(len(k) for k in kf_names),
+        "registered_keyframes": len(reg),
+        "keyframes_rejected": n_bad_kf,
+        "pairs": len(pairs),
+        "models": len(models),
+        "points": len(world_pts),
+        "frames": n_frames,
+        "posed": n_posed,
+        "keyframe_rms": float(rec.compute_mean_reprojection_error()),
+        "floor_found": floor is not None,
+        "focal": {n: float(lens[n].params[0]) for n in lens},
+    }
+    if n_frames and n_posed / n_frames < 0.9:
+        warns.append(
+            f"only {n_posed} of {n_frames} frames posed ({100 * n_posed / n_frames:.1f} %)"
+        )
+    result = VideoReconstruction(
+        names=tuple(names),
+        cameras=cameras,
+        quality=quality,
+        points=readonly(world_pts),
+        colors=readonly(cols),
+        offsets=readonly(np.asarray(offsets, dtype=np.float64)),
+        sync=sync_info,
+        scale=scale,
+        unplaced=unplaced,
+        timings=timings,
+        warnings=tuple(warns),
+        counts=counts,
+        out_dir=out,
+    )
+    result.save()
+    for w in warns:
+        warnings.warn(w, VideoPosesWarning, stacklevel=2)
+    return result
+
+
+class VideoPosesWarning(UserWarning):
+    """Something a user of :func:`reconstruct_videos` should know (low confidence, dropped
+    wearers, wrong intrinsics, no scale)."""
+
+
+def _decoded(vid: Any, fps: float, *, gray: bool) -> Iterator[Any]:
+    """The frames of ``vid`` at ``fps``; a decoder exception is yielded (and ends the
+    stream) instead of raised, so that one broken file does not end the run."""
+    it = iter(vid.frames(fps=fps, gray=gray))
+    while True:
+        try:
+            fr = next(it)
+        except StopIteration:
+            return
+        except Exception as exc:
+            yield exc
+            return
+        yield fr
+
+
+def _usable(img: Any) -> bool:
+    return (
+        isinstance(img, np.ndarray)
+        and img.ndim in (2, 3)
+        and img.size > 0
+        and img.dtype == np.uint8
+    )
+
+
+def _write_png(path: Path, image: npt.NDArray[np.uint8]) -> None:
+    import cv2
+
+    bgr = image[:, :, ::-1] if image.ndim == 3 else image
+    if not cv2.imwrite(str(path), np.ascontiguousarray(bgr)):
+        raise OSError(f"cannot write keyframe {path}")
+
+
+class _quiet:
+    """A one-line progress note around a pycolmap stage (which prints nothing itself)."""
+
+    def __init__(self, progress: bool, what: str) -> None:
+        self.progress, self.what = progress, what
+
+    def __enter__(self) -> None:
+        if self.progress:
+            print(f"{self.what} ...", file=sys.stderr, flush=True)
+
+    def __exit__(self, *exc: object) -> None:
+        return None
+
+
+def _map(
+    db_path: Path, kf_root: Path, sparse: Path, opts: VideoSfmOptions, *, fixed: bool
+) -> dict[int, Any]:
+    import pycolmap
+
+    if opts.global_mapping:
+        g = pycolmap.GlobalPipelineOptions()
+        for path in ("mapper.global_positioning.use_gpu", "mapper.bundle_adjustment.ceres.use_gpu"):
+            obj = g
+            *head, last = path.split(".")
+            try:
+                for h in head:
+                    obj = getattr(obj, h)
+                setattr(obj, last, False)
+            except AttributeError:
+                pass
+        if hasattr(g, "num_threads"):
+            g.num_threads = opts.num_threads
+        if hasattr(g, "random_seed"):
+            g.random_seed = opts.seed
+        return dict(pycolmap.global_mapping(db_path, kf_root, sparse, options=g))
+    inc = pycolmap.IncrementalPipelineOptions()
+    inc.num_threads = opts.num_threads
+    if hasattr(inc, "random_seed"):
+        inc.random_seed = opts.seed
+    if fixed:
+        inc.ba_refine_focal_length = False
+        inc.ba_refine_principal_point = False
+        inc.ba_refine_extra_params = False
+    return dict(pycolmap.incremental_mapping(db_path, kf_root, sparse, options=inc))
+
+
+def _pose_video(
+    vid: Any,
+    name: str,
+    F: int,
+    rec: Any,
+    reg: dict[str, Any],
+    lens: Any,
+    opts: VideoSfmOptions,
+    bar: Any,
+    Rs: FloatArray,
+    ts: FloatArray,
+    rms: FloatArray,
+    n_inl: npt.NDArray[np.int64],
+    is_kf: npt.NDArray[np.bool_],
+    reasons: dict[int, str],
+    split: FloatArray,
+) -> str:
+    """Poses the output frames of one video (fills the arrays in place): registered
+    keyframes from the model; the frames between two keyframes from the map points of both,
+    tracked forward from the one before and backward from the one after, then PnP; with
+    both, ``split (F, 2)`` receives the distance (map units) and angle (radians) between the
+    poses from each side's tracks alone. Holds at
+    most one keyframe interval of grey frames. Returns a warning ('' if none)."""
+    from socialcam._posetrack import solve_pnp, track
+
+    kf: tuple[Any, FloatArray, FloatArray, FloatArray, FloatArray] | None
+    kf = None  # the last registered keyframe: gray, px, X, R, t
+    pending: list[tuple[int, Any]] = []
+
+    def flush(nxt: tuple[Any, ...] | None) -> None:
+        if not pending:
+            return
+        grays = [g for _, g in pending]
+        fwd = track(kf[0], kf[1], kf[2], grays, fb_px=1.0) if kf is not None else None
+        bwd = (
+            track(nxt[0], nxt[1], nxt[2], grays[::-1], fb_px=1.0)[::-1] if nxt is not None else None
+        )
+        for j, (k, _) in enumerate(pending):
+            parts = [p[j] for p in (fwd, bwd) if p is not None]
+            px = np.concatenate([p[0] for p in parts])
+            X = np.concatenate([p[1] for p in parts])
+            # The nearer keyframe's pose starts the PnP iterations.
+            near = kf if (nxt is None or (kf is not None and j < len(pending) / 2)) else nxt
+            assert near is not None
+            fp = solve_pnp(
+                lens,
+                px,
+                X,
+                (near[3], near[4]),
+                min_inliers=opts.min_inliers,
+                max_rms=opts.max_rms,
+                ransac_px=opts.ransac_px,
+                seed=opts.seed,
+            )
+            if fp.R is None or fp.t is None:
+                reasons[k] = fp.reason
+                continue
+            Rs[k], ts[k], rms[k], n_inl[k] = fp.R, fp.t, fp.rms, fp.n_inliers
+            if len(parts) == 2:
+                # Two independent poses, from the tracks of each keyframe: their
+                # disagreement is measured here and judged once the scale is known.
+                one = [
+                    solve_pnp(
+                        lens,
+                        p[0],
+                        p[1],
+                        (fp.R, fp.t),
+                        min_inliers=opts.min_inliers,
+                        max_rms=opts.max_rms,
+                        ransac_px=opts.ransac_px,
+                        seed=opts.seed,
+                    )
+                    for p in parts
+                ]
+                a, b = one
+                if a.R is not None and b.R is not None and a.t is not None and b.t is not None:
+                    split[k, 0] = np.linalg.norm(a.R.T @ a.t - b.R.T @ b.t)
+                    cosang = (np.trace(a.R @ b.R.T) - 1) / 2
+                    split[k, 1] = np.arccos(np.clip(cosang, -1.0, 1.0))
+        pending.clear()
+
+    message = ""
+    for k, fr in enumerate(_decoded(vid, opts.fps, gray=True)):
+        if isinstance(fr, Exception):  # a decoder error: what was posed stays
+            message = (
+                f"{vid.info.path}: decoding failed while posing after {k} output frames "
+                f"({type(fr).__name__}: {fr}); later frames are not posed"
+            )
+            break
+        if k >= F:
+            break
+        bar.update(1)
+        gray = np.ascontiguousarray(fr.image)
+        if not _usable(gray):
+            reasons[k] = "unreadable frame"
+            continue
+        im = reg.get(f"{name}/{k:06d}.png")
+        if im is None:
+            pending.append((k, gray))
+            continue
+        pose = im.cam_from_world() if callable(im.cam_from_world) else im.cam_from_world
+        R = np.asarray(pose.rotation.matrix(), dtype=np.float64)
+        t = np.asarray(pose.translation, dtype=np.float64)
+        px, X, r = _keyframe_observations(rec, im)
+        nxt = (gray, px, X, R, t)
+        flush(nxt)
+        kf = nxt
+        Rs[k], ts[k], rms[k], n_inl[k], is_kf[k] = R, t, r, len(px), True
+    flush(None)
+    for k in range(F):
+        if np.isnan(Rs[k, 0, 0]) and k not in reasons:
+            reasons[k] = "frame not decoded"
+    return message
+
+
+def _keyframe_observations(rec: Any, image: Any) -> tuple[FloatArray, FloatArray, float]:
+    """Raw pixels (OpenCV convention) ``(N, 2)`` and map points ``(N, 3)`` a registered
+    keyframe observes, and their reprojection RMS in pixels."""
+    px, X, err = [], [], []
+    for p in image.points2D:
+        if p.has_point3D():
+            px.append(np.asarray(p.xy, dtype=np.float64) + COLMAP_TO_OPENCV_PIXEL)
+            pt = rec.points3D[p.point3D_id]
+            X.append(pt.xyz)
+            err.append(pt.error)
+    if not px:
+        return np.zeros((0, 2)), np.zeros((0, 3)), float("nan")
+    return np.array(px), np.array(X), float(np.sqrt(np.mean(np.square(err))))
+
+
+def _centre_at(
+    person: str,
+    t: float,
+    quality: dict[str, FrameQuality],
+    centres: dict[str, FloatArray],
+    fps: float,
+) -> FloatArray:
+    """Camera centre of ``person`` at common time ``t``: the posed frame at ``t`` (within
+    half a frame), else linearly interpolated between the posed frames around ``t`` when
+    both lie within 0.5 s."""
+    q = quality.get(person)
+    if q is None or person not in centres or not q.posed.any():
+        raise ValueError(f"known_distance: {person} has no posed frame")
+    idx = np.flatnonzero(q.posed)
+    ts = q.times[idx]
+    k = int(np.argmin(np.abs(ts - t)))
+    if abs(ts[k] - t) <= 0.5 / fps:
+        return centres[person][idx[k]]
+    before, after = idx[ts <= t], idx[ts > t]
+    if len(before) and len(after):
+        i, j = before[-1], after[0]
+        if t - q.times[i] <= 0.5 and q.times[j] - t <= 0.5:
+            w = (t - q.times[i]) / (q.times[j] - q.times[i])
+            return (1 - w) * centres[person][i] + w * centres[person][j]
+    raise ValueError(
+        f"known_distance: {person} has no posed frame near t={t} s; give a time at which "
+        "that camera is posed"
+    )
+
+
+@dataclass(frozen=True)
+class PoseErrors:
+    """Posed frames against ground truth after one similarity fit of all camera centres.
+
+    ``centre (N,)`` metres (in the truth's unit) and ``rotation (N,)`` radians, per posed
+    frame (every wearer, in ``names`` order); ``person (N,)`` index into ``names``;
+    ``scale`` the fitted truth-per-estimate scale; ``n_truth`` frames the truth has at the
+    output times (posed or not).
+    """
+
+    names: tuple[str, ...]
+    person: npt.NDArray[np.int64]
+    centre: FloatArray
+    rotation: FloatArray
+    scale: float
+
+    def to_dict(self) -> dict[str, Any]:
+        return {
+            "n": len(self.centre),
+            "centre_median_m": float(np.median(self.centre)),
+            "centre_p95_m": float(np.percentile(self.centre, 95)),
+            "centre_max_m": float(self.centre.max()),
+            "rotation_median_deg": float(np.degrees(np.median(self.rotation))),
+            "rotation_max_deg": float(np.degrees(self.rotation.max())),
+            "scale": self.scale,
+        }
+
+
+def pose_errors(
+    rec: VideoReconstruction, truth: Mapping[str, Cameras], *, time_tol: float = 1e-3
+) -> PoseErrors:
+    """Compares the posed frames of ``rec`` with true cameras (person → ``Cameras`` with
+    ``times`` on the common clock): each posed frame is matched to the true frame nearest
+    in time (within ``time_tol`` s), then one similarity (Umeyama, :func:`align_similarity`)
+    maps every estimated centre onto the truth."""
+    from socialcam.geometry import align_similarity
+
+    est_C, true_C, est_R, true_R, who = [], [], [], [], []
+    for i, name in enumerate(rec.names):
+        cam = rec.cameras.get(name)
+        if cam is None or len(cam) == 0 or name not in truth:
+            continue
+        tc = truth[name]
+        if tc.times is None or cam.times is None:
+            raise ValueError(f"truth: {name} has no times")
+        order = np.argsort(tc.times)
+        ts = tc.times[order]
+        j = np.clip(np.searchsorted(ts, cam.times), 1, len(ts) - 1)
+        j = np.where(np.abs(ts[j - 1] - cam.times) < np.abs(ts[j] - cam.times), j - 1, j)
+        gap = np.abs(ts[j] - cam.times)
+        if gap.max() > time_tol:
+            raise ValueError(
+                f"truth: {name} has no true frame within {time_tol} s of t={cam.times[np.argmax(gap)]:.4f}"
+            )
+        k = order[j]
+        est_C.append(cam.C)
+        true_C.append(tc.C[k])
+        est_R.append(cam.R)
+        true_R.append(tc.R[k])
+        who.append(np.full(len(cam), i))
+    if not est_C:
+        raise ValueError("rec: no posed frame to compare")
+    E, T = np.concatenate(est_C), np.concatenate(true_C)
+    s, Rs, t = align_similarity(E, T)
+    centre = np.linalg.norm(s * E @ Rs.T + t - T, axis=1)
+    # Estimated world→camera R_e, aligned world: R_e Rsᵀ.
+    Ra = np.concatenate(est_R) @ Rs.T
+    cosang = (np.einsum("nij,nij->n", Ra, np.concatenate(true_R)) - 1) / 2
+    rot = np.arccos(np.clip(cosang, -1.0, 1.0))
+    return PoseErrors(tuple(rec.names), np.concatenate(who), centre, rot, float(s))

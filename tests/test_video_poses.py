@@ -1,0 +1,405 @@
+"""Videos → camera poses (issue 9): rendered scenes with exact truth, end to end.
+
+Thresholds come from measured runs (stated beside each); they are per frame where the
+issue states a per-frame bound (no pose more than 10 cm off).
+"""
+
+from __future__ import annotations
+
+import csv
+import json
+import os
+import shutil
+import stat
+import subprocess
+import sys
+from pathlib import Path
+
+import numpy as np
+import pytest
+
+import socialcam as sc
+from socialcam import sfm
+from socialcam.sfm import KnownDistance, VideoPosesWarning, VideoReconstruction, pose_errors
+
+render = pytest.importorskip("socialcam.synth.render", reason="needs the issue-9 renderer")
+
+
+def _truth_cams(truth):
+    return {n: truth.cameras(v) for v, n in enumerate(truth.names)}
+
+
+def _known_distance(truth, a: int = 0, b: int = 1) -> KnownDistance:
+    """The true distance between wearer a (a third into its video) and wearer b then."""
+    ca, cb = truth.cameras(a), truth.cameras(b)
+    i = len(ca) // 3
+    j = int(np.argmin(np.abs(cb.times - ca.times[i])))
+    d = float(np.linalg.norm(ca.C[i] - cb.C[j]))
+    return KnownDistance(truth.names[a], float(ca.times[i]), truth.names[b], float(cb.times[j]), d)
+
+
+def _manual(truth) -> dict[str, float]:
+    return {n: float(truth.start[v] - truth.start[0]) for v, n in enumerate(truth.names)}
+
+
+@pytest.fixture(scope="module")
+def no_vocab_tree():
+    """Every pycolmap entry point of the vocabulary tree / loop detection raises: they
+    abort the process without a local tree (STACK.md) and must never be reached."""
+    import pycolmap
+
+    mp = pytest.MonkeyPatch()
+
+    def boom(*_a, **_k):
+        raise AssertionError("the vocabulary tree must never be used")
+
+    for name in ("match_vocabtree", "VocabTreePairingOptions", "VocabTreePairGenerator"):
+        if hasattr(pycolmap, name):
+            mp.setattr(pycolmap, name, boom)
+    if hasattr(pycolmap, "match_sequential"):  # its loop detection uses the tree
+        mp.setattr(pycolmap, "match_sequential", boom)
+    yield
+    mp.undo()
+
+
+@pytest.fixture(scope="module")
+def scene(tmp_path_factory):
+    # No calibration segment: in it every wearer fixates the central pillar from its own
+    # side for the first seconds, so 3-s videos would share almost no view.
+    out = tmp_path_factory.mktemp("scene")
+    return render.render_scene(
+        out,
+        n_wearers=3,
+        duration=3.0,
+        size=(320, 240),
+        seed=0,
+        calibration=False,
+        progress=False,
+    )
+
+
+@pytest.fixture(scope="module")
+def posed(scene, tmp_path_factory, no_vocab_tree):
+    out = tmp_path_factory.mktemp("run")
+    kd = _known_distance(scene.truth)
+    rec = sc.poses(
+        scene.videos, out, fps=10, sync=_manual(scene.truth), known_distance=kd, progress=False
+    )
+    return out, rec, kd
+
+
+def test_small_scene_every_frame_posed_against_truth(scene, posed):
+    _, rec, _ = posed
+    d = rec.to_dict()
+    assert d["n_frames"] == 3 * 30
+    # measured 76/90 (seed 0: one wearer's last keyframe is not registered and its tracks
+    # die at the end; 320×240); ≥ 98 % is the issue's target at 640×480, 20 s
+    assert d["registered_fraction"] >= 0.75, d["quality"]
+    e = pose_errors(rec, _truth_cams(scene.truth))
+    # measured: centres 4.6 mm median, 29 mm max; rotations 0.18° median, 0.63° max
+    assert np.median(e.centre) < 0.010
+    assert np.degrees(np.median(e.rotation)) < 0.5
+    assert e.centre.max() < 0.10  # no pose more than 10 cm off (drop instead)
+    assert np.degrees(e.rotation.max()) < 2.0
+    # metric scale from the known distance: the fitted truth/estimate scale is 1
+    assert e.scale == pytest.approx(1.0, abs=0.02)
+    # every wearer has keyframes and in-between frames
+    for name in rec.names:
+        q = rec.quality[name]
+        assert q.keyframe.sum() >= 4
+        assert (q.posed & ~q.keyframe).sum() >= 12
+
+
+def test_poses_are_gravity_aligned_and_pinhole(scene, posed):
+    _, rec, _ = posed
+    # gravity: the mean camera "up" (−y of the camera) is +z of the world
+    R = np.concatenate([c.R for c in rec.cameras.values()])
+    up = -R[:, 1, :].mean(axis=0)
+    assert up[2] / np.linalg.norm(up) > 0.999
+    # K is the pinhole part of the lens (OpenCV pixels): close to the true one
+    for v, name in enumerate(scene.truth.names):
+        K = rec.cameras[name].K[0]
+        Kt = scene.truth.K[v]
+        assert K[0, 0] == pytest.approx(Kt[0, 0], rel=0.03)  # measured 0.2–1.3 %
+        # the principal point is not refined (image centre): exact up to the COLMAP→OpenCV
+        # half-pixel shift, which must be applied once
+        assert np.abs(K[:2, 2] - Kt[:2, 2]).max() < 0.05
+
+
+def test_run_folder_files(scene, posed):
+    out, rec, _ = posed
+    with (out / "poses.csv").open() as fh:
+        rows = list(csv.reader(fh))
+    assert rows[0] == "person,time,cx,cy,cz,qw,qx,qy,qz".split(",")
+    body = rows[1:]
+    assert len(body) == sum(len(c) for c in rec.cameras.values())
+    assert {r[0] for r in body} == set(scene.truth.names)
+    q = np.array([[float(x) for x in r[5:]] for r in body])
+    np.testing.assert_allclose(np.linalg.norm(q, axis=1), 1.0, atol=1e-6)
+    # the quaternion is world-from-camera: it rotates camera +z onto the optical axis
+    first = rec.cameras[body[0][0]]
+    w, x, y, z = q[0]
+    Rwc = np.array(
+        [
+            [1 - 2 * (y * y + z * z), 2 * (x * y - w * z), 2 * (x * z + w * y)],
+            [2 * (x * y + w * z), 1 - 2 * (x * x + z * z), 2 * (y * z - w * x)],
+            [2 * (x * z - w * y), 2 * (y * z + w * x), 1 - 2 * (x * x + y * y)],
+        ]
+    )
+    np.testing.assert_allclose(Rwc, first.R[0].T, atol=1e-6)
+    np.testing.assert_allclose([float(v) for v in body[0][2:5]], first.C[0], atol=1e-5)
+    sync = json.loads((out / "sync.json").read_text())
+    assert [v["person"] for v in sync["videos"]] == list(scene.truth.names)
+    assert sync["videos"][0]["offset"] == 0.0
+    report = json.loads((out / "report.json").read_text())
+    for stage in ("features", "matching", "mapping", "posing frames"):
+        assert report["timings"][stage] >= 0
+    assert report["counts"]["posed"] == len(body)
+    # written with the umask's permissions, no temporary left
+    mode = stat.S_IMODE(os.stat(out / "poses.csv").st_mode)
+    umask = os.umask(0)
+    os.umask(umask)
+    assert mode == 0o666 & ~umask
+    assert not [p for p in out.iterdir() if p.name.endswith(".tmp")]
+
+
+def test_rerun_reloads_instead_of_recomputing(scene, posed, monkeypatch):
+    out, rec, kd = posed
+
+    def fail(*_a, **_k):
+        raise AssertionError("recomputed")
+
+    monkeypatch.setattr("socialcam.pipeline.reconstruct_videos", fail)
+    again = sc.poses(
+        scene.videos, out, fps=10, sync=_manual(scene.truth), known_distance=kd, progress=False
+    )
+    assert json.loads((out / "report.json").read_text())["cached"] is True
+    for name in rec.names:
+        np.testing.assert_array_equal(again.cameras[name].C, rec.cameras[name].C)
+        np.testing.assert_array_equal(again.cameras[name].times, rec.cameras[name].times)
+    loaded = VideoReconstruction.load(out / "cache" / "sfm")
+    assert loaded.names == rec.names
+    assert len(loaded.points) == len(rec.points)
+    # the loaded cameras still know their lens
+    x = np.array([[10.0, 20.0]])
+    name = rec.names[0]
+    np.testing.assert_allclose(
+        loaded.cameras[name][:1].undistort_points(x), rec.cameras[name][:1].undistort_points(x)
+    )
+
+
+def test_cli_poses(scene, posed, tmp_path):
+    out, _, _ = posed
+    # the same inputs and options through the CLI → the cached model is reused
+    kd = _known_distance(scene.truth)
+    args = [str(p) for p in scene.videos] + ["--out", str(out), "--fps", "10"]
+    for n, off in _manual(scene.truth).items():
+        args += ["--offset", f"{n}={off!r}"]
+    args += ["--known-distance", kd.person_a, repr(kd.time_a), kd.person_b, repr(kd.time_b)]
+    args += [repr(kd.metres)]
+    r = subprocess.run(
+        [sys.executable, "-m", "socialcam.cli", "poses", *args],
+        capture_output=True,
+        text=True,
+        timeout=600,
+    )
+    assert r.returncode == 0, r.stderr
+    assert "posed" in r.stdout and "poses.csv" in r.stdout
+    bad = subprocess.run(
+        [
+            sys.executable,
+            "-m",
+            "socialcam.cli",
+            "poses",
+            str(tmp_path / "nope.mp4"),
+            "--out",
+            str(tmp_path / "o"),
+        ],
+        capture_output=True,
+        text=True,
+        timeout=120,
+    )
+    assert bad.returncode == 2
+    assert "nope.mp4" in bad.stderr
+
+
+# ----------------------------------------------------------------------------- bad input
+
+
+def test_not_a_video(tmp_path):
+    p = tmp_path / "notes.mp4"
+    p.write_text("not a video")
+    with pytest.raises(ValueError, match=r"notes\.mp4"):
+        sfm.reconstruct_videos([p], out_dir=tmp_path / "o", progress=False)
+
+
+def test_video_without_audio_needs_manual_offsets(tmp_path):
+    s = render.render_scene(
+        tmp_path / "s", n_wearers=2, duration=0.5, size=(160, 120), audio=False, progress=False
+    )
+    with pytest.raises(ValueError, match=r"no audio.*manual offsets"):
+        sfm.reconstruct_videos(s.videos, out_dir=tmp_path / "o", progress=False)
+
+
+def test_bad_options(tmp_path):
+    with pytest.raises(ValueError, match="keyframe_fps"):
+        sfm.VideoSfmOptions(fps=10, keyframe_fps=20)
+    with pytest.raises(ValueError, match="camera_model"):
+        sfm.VideoSfmOptions(camera_model="FISHY")  # type: ignore[arg-type]
+    with pytest.raises(ValueError, match="bogus"):
+        sfm.reconstruct_videos(["a.mp4"], out_dir=tmp_path, bogus=1)
+    with pytest.raises(ValueError, match="videos"):
+        sfm.reconstruct_videos([], out_dir=tmp_path)
+    with pytest.raises(ValueError, match="known_distance"):
+        KnownDistance("a", 0.0, "b", 1.0, -2.0)
+
+
+@pytest.mark.filterwarnings("ignore::socialcam.sfm.VideoPosesWarning")
+def test_one_wearer_and_a_wearer_from_another_room(scene, tmp_path, no_vocab_tree):
+    """One wearer alone works; a video sharing no view with it (another room) is reported
+    as not placed, and the run goes on with the largest model."""
+    other = render.render_scene(
+        tmp_path / "other", n_wearers=1, duration=2.0, size=(320, 240), seed=7, progress=False
+    )
+    stranger = tmp_path / "stranger.mp4"
+    shutil.copy(other.videos[0], stranger)
+    with pytest.warns(VideoPosesWarning, match="stranger: could not be placed"):
+        rec = sfm.reconstruct_videos(
+            [scene.videos[0], stranger],
+            out_dir=tmp_path / "o",
+            sync={scene.truth.names[0]: 0.0, "stranger": 0.0},
+            progress=False,
+        )
+    assert rec.unplaced == ("stranger",)
+    assert "stranger" not in rec.cameras
+    q = rec.quality[scene.truth.names[0]]
+    assert q.posed.mean() >= 0.8  # measured 27/30 (30/30 with the earlier renderer)
+    e = pose_errors(rec, {scene.truth.names[0]: scene.truth.cameras(0)})
+    # one wearer, 3 s: no scale (similarity fit), measured 3 mm / 0.2°
+    assert np.median(e.centre) < 0.01 and e.centre.max() < 0.10
+    assert all(
+        r == "wearer not placed in the model" for r in rec.quality["stranger"].reasons.values()
+    )
+
+
+class _CorruptFrames:
+    """A video whose output frame ``bad`` decodes to noise (a corrupt frame)."""
+
+    def __init__(self, video, bad: int) -> None:
+        self._v, self._bad = video, bad
+        self.info = video.info
+
+    def frames(self, fps=None, **kw):
+        rng = np.random.default_rng(0)
+        for k, fr in enumerate(self._v.frames(fps, **kw)):
+            if k == self._bad:
+                noise = rng.integers(0, 256, fr.image.shape, dtype=np.uint8)
+                fr = type(fr)(fr.index, fr.time, noise)
+            yield fr
+
+    def __getattr__(self, name):
+        return getattr(self._v, name)
+
+
+@pytest.mark.filterwarnings("ignore::socialcam.sfm.VideoPosesWarning")
+def test_corrupt_frame_is_dropped_not_guessed(scene, tmp_path, monkeypatch, no_vocab_tree):
+    from socialcam import video as video_mod
+
+    real_open = video_mod.open_video
+    bad = 12  # between keyframes 10 and 15 (2 keyframes/s at 10 fps)
+
+    def opener(path, **kw):
+        v = real_open(path, **kw)
+        return _CorruptFrames(v, bad) if Path(path).stem == scene.truth.names[0] else v
+
+    monkeypatch.setattr(video_mod, "open_video", opener)
+    two = scene.truth.names[:2]
+    rec = sfm.reconstruct_videos(
+        scene.videos[:2],
+        out_dir=tmp_path / "o",
+        sync={n: _manual(scene.truth)[n] for n in two},
+        progress=False,
+    )
+    q = rec.quality[scene.truth.names[0]]
+    assert not q.posed[bad]
+    assert bad in q.reasons
+    # the frames around it are still posed (from the other keyframe's tracks), and right
+    assert q.posed[bad - 1] and q.posed[bad + 1]
+    truth = _truth_cams(scene.truth)
+    e = pose_errors(rec, {n: truth[n] for n in scene.truth.names[:2]})
+    assert e.centre.max() < 0.10  # measured 9 mm
+
+
+@pytest.mark.filterwarnings("ignore::socialcam.sfm.VideoPosesWarning")
+def test_wrong_intrinsics_are_detected(scene, tmp_path, no_vocab_tree):
+    """Focal lengths 25 % too long, refined (the default): the videos move them back towards
+    the truth and a warning says the given ones look wrong and to self-calibrate."""
+    names = scene.truth.names[:2]
+    wrong = [(scene.truth.K[v] * [[1.25], [1.25], [1]], [0.0]) for v in range(2)]
+    with pytest.warns(VideoPosesWarning, match="intrinsics look wrong.*intrinsics=None"):
+        rec = sfm.reconstruct_videos(
+            scene.videos[:2],
+            out_dir=tmp_path / "refined",
+            sync={n: _manual(scene.truth)[n] for n in names},
+            intrinsics=wrong,
+            progress=False,
+        )
+    # refined from +25 %: measured 199.8 px for a true 214.3 (−7 %; 2 wearers × 3 s give
+    # bundle adjustment little to calibrate from) — at least halfway back to the truth
+    for v, n in enumerate(names):
+        f_true, f_given = scene.truth.K[v, 0, 0], wrong[v][0][0, 0]
+        assert abs(rec.cameras[n].K[0, 0, 0] - f_true) < 0.5 * abs(f_given - f_true)
+    # The poses themselves are wrong (measured 0.59 m median, 2.3 m max after a similarity):
+    # the warning says so and tells the user to self-calibrate; the self-calibrated run
+    # is the small-scene test above.
+    # Kept fixed (refine_intrinsics=False), the same wrong focal gave a keyframe
+    # reprojection error under 1 px (bundle adjustment bends the structure): that case is
+    # NOT detected yet — see the issue-9 report.
+
+
+@pytest.mark.filterwarnings("ignore::socialcam.sfm.VideoPosesWarning")
+@pytest.mark.parametrize("lens", ["radial"])
+def test_distorted_lens_scene(tmp_path, lens, no_vocab_tree):
+    s = render.render_scene(
+        tmp_path / "s",
+        n_wearers=2,
+        duration=3.0,
+        size=(320, 240),
+        seed=3,
+        distortion=lens,
+        calibration=False,
+        progress=False,
+    )
+    model = {"radial": "RADIAL", "fisheye": "OPENCV_FISHEYE"}[lens]
+    rec = sfm.reconstruct_videos(
+        s.videos,
+        out_dir=tmp_path / "o",
+        sync=_manual(s.truth),
+        camera_model=model,
+        progress=False,
+    )
+    frac = rec.to_dict()["registered_fraction"]
+    e = pose_errors(rec, _truth_cams(s.truth))
+    got = (frac, e.to_dict())
+    # Thresholds are the small-scene ones; they pass here. Without undistortion between
+    # keyframes (mutation) this scene measured 75 % posed and 15 mm median centre error.
+    assert frac >= 0.75, got
+    assert np.median(e.centre) < 0.01, got
+    assert np.degrees(np.median(e.rotation)) < 0.5, got
+    assert e.centre.max() < 0.10, got
+    # undistortion: the lens model maps raw pixels onto the true pinhole pixels
+    v = 0
+    name = s.truth.names[v]
+    params = s.truth.dist[v]["params"]
+    K = s.truth.K[v]
+    import cv2
+
+    grid = np.stack(np.meshgrid([20.0, 160.0, 300.0], [20.0, 120.0, 220.0]), -1).reshape(-1, 2)
+    coeffs = np.r_[np.asarray(params, float), np.zeros(max(0, 4 - len(params)))]
+    true_und = cv2.undistortPoints(grid[:, None], K, coeffs, P=K).reshape(-1, 2)
+    est_und = rec.cameras[name][:1].undistort_points(grid[None])[0]
+    est_K = rec.cameras[name].K[0]
+    # compare as normalised rays (the estimated K differs slightly from the true one)
+    tn = (true_und - K[:2, 2]) / K[0, 0]
+    en = (est_und - est_K[:2, 2]) / est_K[0, 0]
+    assert np.abs(tn - en).max() * K[0, 0] < 1.5  # pixels
