@@ -10,6 +10,7 @@ Conventions (see DESIGN.md): metres, seconds, radians; float64 arrays; pinhole
 from socialcam import mocap, sfm, synth
 from socialcam._core import __version__
 from socialcam.articulated import (
+    ArticulatedOptions,
     ArticulatedTrajectory,
     BqpResult,
     Skeleton,
@@ -61,6 +62,7 @@ from socialcam.trajectory import (
 
 __all__ = [
     "Anomalies",
+    "ArticulatedOptions",
     "ArticulatedTrajectory",
     "BqpResult",
     "Cameras",

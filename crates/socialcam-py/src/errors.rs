@@ -14,9 +14,9 @@
 
 use pyo3::create_exception;
 use pyo3::exceptions::{PyKeyboardInterrupt, PyRuntimeError, PyValueError};
+use pyo3::prelude::*;
 use std::sync::{Condvar, Mutex};
 use std::time::Duration;
-use pyo3::prelude::*;
 
 create_exception!(
     socialcam,
