@@ -533,6 +533,9 @@ impl Fit<'_> {
 /// Outcome of [`refine`]: coefficients, radius, iterations, converged.
 type Refined = (DVector<f64>, DVector<f64>, f64, usize, bool);
 
+/// A refined choice of roots: cost, spherical frame, fit.
+type Evaluated = (f64, Matrix3<f64>, Refined);
+
 /// Reconstructs one articulated trajectory (Eq 4.5–4.12): `pixels[i]` is the child's pixel
 /// in `cameras[i]` at `times[i]` (`None` = missing), `parent[i]` the parent's world position.
 pub fn reconstruct_articulated(
@@ -635,7 +638,7 @@ pub fn reconstruct_articulated(
             // frame, judged by the refined reprojection error.
             let graze = grazing_points(&prog.cand, &prog.order, opts.grazing_separation);
             for _ in 0..opts.flip_rounds {
-                let mut improved: Option<(Vec<bool>, (f64, Matrix3<f64>, Refined))> = None;
+                let mut improved: Option<(Vec<bool>, Evaluated)> = None;
                 for &g in &graze {
                     for part in [&prog.order[g + 1..], &prog.order[..g]] {
                         crate::interrupt::check()?;
@@ -659,7 +662,7 @@ pub fn reconstruct_articulated(
                 }
             }
         }
-        if best.as_ref().is_none_or(|b| current.0 < b.0) {
+        if best.as_ref().map_or(true, |b| current.0 < b.0) {
             let (c, frame, refined) = current;
             best = Some((c, frame, refined, prog.bqp.clone(), prog.bqp_size, radius));
         }
