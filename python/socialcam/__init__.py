@@ -11,6 +11,7 @@ options keyword-only; bad input raises ``ValueError`` naming the argument.
 from socialcam import mocap, sfm, synth
 from socialcam._core import __version__
 from socialcam.articulated import (
+    ArticulatedOptions,
     ArticulatedTrajectory,
     BqpOptions,
     BqpResult,
@@ -69,6 +70,7 @@ from socialcam.trajectory import (
 
 __all__ = [
     "Anomalies",
+    "ArticulatedOptions",
     "ArticulatedTrajectory",
     "BqpOptions",
     "BqpResult",

@@ -232,14 +232,11 @@ def reconstruct_articulated(
     parent: _F64,
     times: _F64,
     length: float,
-    k: int,
-    refine: bool = True,
-    time_limit: float | None = None,
-    node_limit: int | None = None,
-    fit_radius: bool = False,
+    options: Any,
 ) -> dict[str, Any]:
-    """One articulated trajectory from ``x (F,2)`` (NaN = missing) and ``parent (F,3)``: a
-    dict with ``X (F,3)``, ``radius``, ``coeffs_theta``/``coeffs_phi (K,)``, ``bqp_size``,
+    """One articulated trajectory from ``x (F,2)`` (NaN = missing) and ``parent (F,3)``;
+    ``options`` is an ``ArticulatedOptions`` (its fields are read). A dict with ``X (F,3)``,
+    ``radius``, ``bqp_radius``, ``coeffs_theta``/``coeffs_phi (K,)``, ``bqp_size``,
     ``bqp_objective``, ``bqp_gap``, ``bqp_nodes``, ``bqp_optimal``, ``n_observed``,
     ``reprojection_rms``, ``lm_iterations``, ``converged``."""
 
@@ -252,11 +249,7 @@ def reconstruct_skeleton(
     lengths: list[float],
     root: _F64,
     times: _F64,
-    k: int,
-    refine: bool = True,
-    time_limit: float | None = None,
-    node_limit: int | None = None,
-    fit_radius: bool = False,
+    options: Any,
 ) -> tuple[_F64, list[dict[str, Any] | None]]:
     """Whole skeleton from ``x (F,J,2)`` and ``root (F,3)``: ``X (F,J,3)`` and one dict per
     joint as in :func:`reconstruct_articulated` (``None`` for the root)."""

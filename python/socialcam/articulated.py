@@ -10,6 +10,7 @@ the root outwards (Eq 4.6).
 
 from __future__ import annotations
 
+import dataclasses
 from collections.abc import Sequence
 from dataclasses import dataclass, field, fields, replace
 from typing import Any
@@ -18,10 +19,18 @@ import numpy as np
 import numpy.typing as npt
 
 from socialcam import _core
-from socialcam._validate import FloatArray, as_float_array, check_float, check_int, readonly
+from socialcam._validate import (
+    FloatArray,
+    as_float_array,
+    check_choice,
+    check_float,
+    check_int,
+    readonly,
+)
 from socialcam.camera import Cameras
 
 __all__ = [
+    "ArticulatedOptions",
     "ArticulatedTrajectory",
     "BqpOptions",
     "BqpResult",
@@ -175,8 +184,9 @@ class ArticulatedTrajectory:
     ----------
     X : (F, 3) child positions in metres, every frame (missing frames imputed).
     times : (F,) seconds.
-    radius : bone length used (the given one, enlarged so that every ray meets the
-        sphere, Sec 4.4.1).
+    radius : bone length of the result: the given one enlarged so that every ray meets the
+        sphere (Sec 4.4.1), then refined within ``length_tol`` by the robust method.
+    bqp_radius : radius of the sphere whose binary program (Eq 4.12) gave the result.
     coeffs_theta, coeffs_phi : (K,) DCT coefficients of the spherical angles (radians).
     bqp_size, bqp_nodes, bqp_optimal, bqp_gap : the binary program of Eq 4.12.
     n_observed : frames with an observation.
@@ -187,6 +197,7 @@ class ArticulatedTrajectory:
     X: FloatArray
     times: FloatArray
     radius: float
+    bqp_radius: float
     coeffs_theta: FloatArray
     coeffs_phi: FloatArray
     bqp_size: int
@@ -208,6 +219,7 @@ def _traj(d: dict[str, Any], times: FloatArray) -> ArticulatedTrajectory:
         X=d["X"],
         times=times,
         radius=float(d["radius"]),
+        bqp_radius=float(d["bqp_radius"]),
         coeffs_theta=d["coeffs_theta"],
         coeffs_phi=d["coeffs_phi"],
         bqp_size=int(d["bqp_size"]),
@@ -225,16 +237,100 @@ def _times(cameras: Cameras) -> FloatArray:
     return np.arange(len(cameras), dtype=np.float64) if t is None else np.asarray(t)
 
 
+_METHODS = ("robust", "thesis")
+
+
+@dataclass(frozen=True)
+class ArticulatedOptions:
+    """Options of :func:`reconstruct_articulated` and :func:`reconstruct_skeleton`.
+
+    Attributes
+    ----------
+    k : number of DCT basis vectors per spherical angle (``Θ`` of Eq 4.4), ≥ 1.
+    refine : run the Levenberg–Marquardt refinement of the reprojection error (Eq 4.5).
+    method : ``"robust"`` (default) or ``"thesis"``. The thesis solves the binary program
+        of Eq 4.12 on the sphere of the given length (enlarged until every ray meets it,
+        Sec 4.4.1) and refines with that length fixed. A length or a parent only a few
+        percent off then separates the two ray–sphere roots where the true bone crosses
+        the viewing ray at right angles, so the smooth solution cannot pass from one root
+        to the other and follows the impostor. ``"robust"`` also solves the program on a
+        sphere shrunk to the ``tangent_quantile`` of the parent-to-ray distances (the
+        near-grazing rays then touch it once, both roots' evidence merged), refines each
+        start with the bone length free within ``length_tol``, and keeps the start with
+        the lowest reprojection error.
+    fit_radius : set the thesis sphere to the largest parent-to-ray distance instead of
+        only enlarging the given length when a ray misses.
+    tangent_quantile : robust method: quantile in [0, 1] of the parent-to-ray distances
+        giving the shrunk sphere's radius (never above the thesis radius).
+    length_tol : robust method: the bone length is refined within ``[r/(1+tol), r(1+tol)]``
+        around the thesis radius ``r``, with a Gaussian prior of relative deviation ``tol``
+        (a deviation of ``tol`` costs 0.3 px of reprojection error per observation);
+        ≥ 0, 0 keeps it fixed.
+    grazing_separation : robust method: where, at a local minimum in time, the two roots'
+        unit directions are closer than this (in [0, 2]; 1.0 ≈ the bone within 30° of
+        perpendicular to the ray), the true trajectory may cross to the other root or
+        touch and come back: both are refined and the lower reprojection error kept.
+    flip_rounds : robust method: rounds of the greedy search over those passes (≥ 0; each
+        round keeps the single pass that lowers the reprojection error most).
+    max_iter : Levenberg–Marquardt iterations of the refinement (≥ 1).
+    time_limit : seconds per binary program (the best incumbent is used after it), or
+        ``None``.
+    node_limit : branch-and-bound nodes per binary program (deterministic, unlike
+        ``time_limit``); ``None`` = prove optimality whatever it takes.
+    """
+
+    k: int = 8
+    refine: bool = True
+    method: str = "robust"
+    fit_radius: bool = False
+    tangent_quantile: float = 0.8
+    length_tol: float = 0.1
+    grazing_separation: float = 1.0
+    flip_rounds: int = 3
+    max_iter: int = 100
+    time_limit: float | None = None
+    node_limit: int | None = DEFAULT_NODE_LIMIT
+
+    def __post_init__(self) -> None:
+        check_int(self.k, "k", min=1)
+        for name in ("refine", "fit_radius"):
+            if not isinstance(getattr(self, name), (bool, np.bool_)):
+                raise ValueError(f"{name}: expected a bool, got {getattr(self, name)!r}")
+        check_choice(self.method, "method", _METHODS)
+        check_float(self.tangent_quantile, "tangent_quantile", min=0.0, max=1.0)
+        check_float(self.length_tol, "length_tol", min=0.0, max=10.0)
+        check_float(self.grazing_separation, "grazing_separation", min=0.0, max=2.0)
+        check_int(self.flip_rounds, "flip_rounds", min=0, max=100)
+        check_int(self.max_iter, "max_iter", min=1, max=100_000)
+        if self.time_limit is not None:
+            check_float(self.time_limit, "time_limit", min=0.0, max=1e9)
+        if self.node_limit is not None:
+            check_int(self.node_limit, "node_limit", min=0, max=2**63 - 1)
+
+    def to_dict(self) -> dict[str, Any]:
+        return dataclasses.asdict(self)
+
+
+def _options(options: ArticulatedOptions | None, overrides: dict[str, Any]) -> ArticulatedOptions:
+    if options is None:
+        options = ArticulatedOptions()
+    elif not isinstance(options, ArticulatedOptions):
+        raise ValueError(f"options: expected ArticulatedOptions, got {type(options).__name__}")
+    names = {f.name for f in dataclasses.fields(ArticulatedOptions)}
+    for key in overrides:
+        if key not in names:
+            raise ValueError(f"{key}: not an option of ArticulatedOptions")
+    return dataclasses.replace(options, **overrides) if overrides else options
+
+
 def reconstruct_articulated(
     x: npt.ArrayLike,
     cameras: Cameras,
     parent: npt.ArrayLike,
     length: float,
-    k: int,
-    refine: bool = True,
-    time_limit: float | None = None,
-    node_limit: int | None = DEFAULT_NODE_LIMIT,
-    fit_radius: bool = False,
+    *,
+    options: ArticulatedOptions | None = None,
+    **overrides: Any,
 ) -> ArticulatedTrajectory:
     """Reconstructs a joint at fixed distance ``length`` from a known parent trajectory.
 
@@ -244,43 +340,25 @@ def reconstruct_articulated(
         missing and get imputed by the basis.
     cameras : ``F`` cameras with their ``times`` (frame indices when ``times`` is None).
     parent : (F, 3) parent positions, metres, every frame.
-    length : bone length in metres (> 0); enlarged when some ray misses the sphere.
-    k : number of DCT basis vectors per angle.
-    refine : run the Levenberg–Marquardt refinement of Eq 4.5.
-    time_limit : seconds for the binary program (the best incumbent is used after it).
-    node_limit : branch-and-bound nodes for the binary program (deterministic, unlike
-        ``time_limit``); ``None`` = prove optimality whatever it takes. The result says
-        whether the program was solved to optimality (``bqp_optimal``).
-    fit_radius : set the sphere radius to the largest parent-to-ray distance over the
-        frames instead of only enlarging ``length`` when a ray misses (the thesis). Assumes
-        the bone is once roughly perpendicular to the viewing ray; much more robust to an
-        over-estimated length and to root error.
+    length : bone length in metres (> 0); see :class:`ArticulatedOptions` for how it is
+        enlarged (thesis) or refined (robust method).
+    options : :class:`ArticulatedOptions`; ``overrides`` replace some of its fields
+        (e.g. ``k=10, method="thesis"``).
 
     Raises
     ------
     ValueError
-        Bad shapes, non-finite parent, ``length <= 0``.
+        Bad shapes, non-finite parent, ``length <= 0``, a bad or unknown option.
     DegenerateError
         Fewer observed frames than ``k``.
     """
+    opts = _options(options, overrides)
     f = len(cameras)
     x_ = as_float_array(x, "x", (f, 2), allow_nan=True)
     p_ = as_float_array(parent, "parent", (f, 3))
+    length_ = check_float(length, "length", min=0.0, min_exclusive=True)
     t = _times(cameras)
-    d = _core.reconstruct_articulated(
-        cameras.K,
-        cameras.R,
-        cameras.C,
-        x_,
-        p_,
-        t,
-        float(length),
-        int(k),
-        refine,
-        time_limit,
-        node_limit,
-        fit_radius,
-    )
+    d = _core.reconstruct_articulated(cameras.K, cameras.R, cameras.C, x_, p_, t, length_, opts)
     return _traj(d, t)
 
 
@@ -468,11 +546,9 @@ def reconstruct_skeleton(
     cameras: Cameras,
     skeleton: Skeleton,
     root: npt.ArrayLike,
-    k: int = 8,
-    refine: bool = True,
-    time_limit: float | None = None,
-    node_limit: int | None = DEFAULT_NODE_LIMIT,
-    fit_radius: bool = False,
+    *,
+    options: ArticulatedOptions | None = None,
+    **overrides: Any,
 ) -> SkeletonReconstruction:
     """Reconstructs every joint recursively from the root trajectory (Eq 4.6).
 
@@ -482,9 +558,9 @@ def reconstruct_skeleton(
     cameras : ``F`` cameras, one per frame.
     skeleton : the tree and bone lengths.
     root : (F, 3) root trajectory, metres.
-    k, refine, time_limit, node_limit, fit_radius : as in :func:`reconstruct_articulated`,
-        for every joint.
+    options, overrides : as in :func:`reconstruct_articulated`, for every joint.
     """
+    opts = _options(options, overrides)
     f = len(cameras)
     j = len(skeleton.parents)
     x_ = as_float_array(x, "x", (f, j, 2), allow_nan=True)
@@ -492,19 +568,7 @@ def reconstruct_skeleton(
     t = _times(cameras)
     lengths = _bone_lengths(skeleton.parents, skeleton.lengths)
     X, dicts = _core.reconstruct_skeleton(
-        cameras.K,
-        cameras.R,
-        cameras.C,
-        x_,
-        list(skeleton.parents),
-        lengths,
-        r_,
-        t,
-        int(k),
-        refine,
-        time_limit,
-        node_limit,
-        fit_radius,
+        cameras.K, cameras.R, cameras.C, x_, list(skeleton.parents), lengths, r_, t, opts
     )
     joints = tuple(None if d is None else _traj(d, t) for d in dicts)
     return SkeletonReconstruction(X, joints)

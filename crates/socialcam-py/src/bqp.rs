@@ -11,7 +11,9 @@ use numpy::{
 };
 use pyo3::exceptions::PyValueError;
 use pyo3::prelude::*;
-use socialcore::articulated::{self as art, ArticulatedOptions, ArticulatedResult, Skeleton};
+use socialcore::articulated::{
+    self as art, ArticulatedMethod, ArticulatedOptions, ArticulatedResult, Skeleton,
+};
 use socialcore::bqp::{solve_bqp as core_solve, BqpOptions, BqpProblem, BqpSolution};
 use socialcore::geometry::Camera;
 use std::time::Duration;
@@ -169,19 +171,59 @@ fn times_of(t: &PyReadonlyArray1<'_, f64>, f: usize) -> PyResult<Vec<f64>> {
     Ok(v)
 }
 
-fn art_options(
+/// The fields of the Python `ArticulatedOptions` dataclass (validated there; the core
+/// validates again and returns errors, never panics).
+#[derive(FromPyObject)]
+struct PyArticulatedOptions {
+    #[pyo3(attribute)]
     k: usize,
+    #[pyo3(attribute)]
     refine: bool,
-    time_limit: Option<f64>,
-    node_limit: Option<u64>,
+    #[pyo3(attribute)]
+    method: String,
+    #[pyo3(attribute)]
     fit_radius: bool,
-) -> PyResult<ArticulatedOptions> {
+    #[pyo3(attribute)]
+    tangent_quantile: f64,
+    #[pyo3(attribute)]
+    length_tol: f64,
+    #[pyo3(attribute)]
+    grazing_separation: f64,
+    #[pyo3(attribute)]
+    flip_rounds: usize,
+    #[pyo3(attribute)]
+    max_iter: usize,
+    #[pyo3(attribute)]
+    time_limit: Option<f64>,
+    #[pyo3(attribute)]
+    node_limit: Option<u64>,
+}
+
+fn art_options(o: &PyArticulatedOptions) -> PyResult<ArticulatedOptions> {
+    let method = match o.method.as_str() {
+        "robust" => ArticulatedMethod::Robust,
+        "thesis" => ArticulatedMethod::Thesis,
+        other => {
+            return Err(PyValueError::new_err(format!(
+                "method: expected 'robust' or 'thesis', got {other:?}"
+            )))
+        }
+    };
+    let defaults = ArticulatedOptions::default();
     Ok(ArticulatedOptions {
-        k,
-        refine,
-        fit_radius,
-        bqp: bqp_options(time_limit, node_limit)?,
-        ..ArticulatedOptions::default()
+        k: o.k,
+        refine: o.refine,
+        fit_radius: o.fit_radius,
+        method,
+        tangent_quantile: o.tangent_quantile,
+        length_tol: o.length_tol,
+        grazing_separation: o.grazing_separation,
+        flip_rounds: o.flip_rounds,
+        lm: socialcore::geometry::LmOptions {
+            max_iterations: o.max_iter,
+            ..defaults.lm
+        },
+        bqp: bqp_options(o.time_limit, o.node_limit)?,
     })
 }
 
@@ -200,6 +242,7 @@ fn result_dict<'py>(
     }
     d.set_item("X", pts.into_pyarray(py))?;
     d.set_item("radius", r.radius)?;
+    d.set_item("bqp_radius", r.bqp_radius)?;
     d.set_item(
         "coeffs_theta",
         Array1::from(r.coeffs_theta).into_pyarray(py),
@@ -219,7 +262,7 @@ fn result_dict<'py>(
 
 /// One articulated trajectory (Eq 4.5–4.12); returns a dict (see `_core.pyi`).
 #[pyfunction]
-#[pyo3(signature = (k_mat, r_mat, c_mat, x, parent, times, length, k, refine=true, time_limit=None, node_limit=None, fit_radius=false))]
+#[pyo3(signature = (k_mat, r_mat, c_mat, x, parent, times, length, options))]
 #[allow(clippy::too_many_arguments)]
 fn reconstruct_articulated<'py>(
     py: Python<'py>,
@@ -230,18 +273,14 @@ fn reconstruct_articulated<'py>(
     parent: PyReadonlyArray2<'py, f64>,
     times: PyReadonlyArray1<'py, f64>,
     length: f64,
-    k: usize,
-    refine: bool,
-    time_limit: Option<f64>,
-    node_limit: Option<u64>,
-    fit_radius: bool,
+    options: PyArticulatedOptions,
 ) -> PyResult<Bound<'py, pyo3::types::PyDict>> {
     let cams = cameras(&k_mat, &r_mat, &c_mat)?;
     let f = cams.len();
     let px = pixels_2d(&x, f)?;
     let par = points(&parent, "parent", f)?;
     let t = times_of(&times, f)?;
-    let opts = art_options(k, refine, time_limit, node_limit, fit_radius)?;
+    let opts = art_options(&options)?;
     let r = detach(py, || {
         art::reconstruct_articulated(&cams, &px, &par, &t, length, &opts)
     })?;
@@ -250,7 +289,7 @@ fn reconstruct_articulated<'py>(
 
 /// Whole skeleton from its root (Eq 4.6): `(X (F,J,3), [dict or None per joint])`.
 #[pyfunction]
-#[pyo3(signature = (k_mat, r_mat, c_mat, x, parents, lengths, root, times, k, refine=true, time_limit=None, node_limit=None, fit_radius=false))]
+#[pyo3(signature = (k_mat, r_mat, c_mat, x, parents, lengths, root, times, options))]
 #[allow(clippy::too_many_arguments)]
 fn reconstruct_skeleton<'py>(
     py: Python<'py>,
@@ -262,11 +301,7 @@ fn reconstruct_skeleton<'py>(
     lengths: Vec<f64>,
     root: PyReadonlyArray2<'py, f64>,
     times: PyReadonlyArray1<'py, f64>,
-    k: usize,
-    refine: bool,
-    time_limit: Option<f64>,
-    node_limit: Option<u64>,
-    fit_radius: bool,
+    options: PyArticulatedOptions,
 ) -> PyResult<(
     Bound<'py, PyArray3<f64>>,
     Vec<Option<Bound<'py, pyo3::types::PyDict>>>,
@@ -300,7 +335,7 @@ fn reconstruct_skeleton<'py>(
     }
     let rt = points(&root, "root", f)?;
     let t = times_of(&times, f)?;
-    let opts = art_options(k, refine, time_limit, node_limit, fit_radius)?;
+    let opts = art_options(&options)?;
     let (pos, res) = detach(py, || {
         art::reconstruct_skeleton(&cams, &px, &sk, &rt, &t, &opts)
     })?;

@@ -19,6 +19,26 @@ use crate::geometry::{line_point_distance, ray_sphere, Camera, LmOptions};
 use nalgebra::{DMatrix, DVector, Matrix3, Vector2, Vector3};
 use std::f64::consts::{PI, TAU};
 
+/// How the ray–sphere ambiguity is resolved and the bone length treated.
+#[derive(Debug, Clone, Copy, PartialEq, Eq)]
+pub enum ArticulatedMethod {
+    /// The thesis (Sec 4.2): one BQP at the given length (enlarged so that every ray meets
+    /// the sphere), refinement of Eq 4.5 at that fixed length.
+    Thesis,
+    /// Robust to length and root error: the BQP is also solved on a sphere shrunk to a
+    /// quantile of the parent-to-ray distances (near-grazing rays then touch the sphere at
+    /// one point, so the true trajectory can pass from one root to the other), each start
+    /// is refined with the bone length free within `length_tol`, and the start with the
+    /// lowest reprojection error wins.
+    Robust,
+}
+
+/// Weight of the bone-length prior of the robust refinement: a length off by `length_tol`
+/// (relative) costs as much as `LENGTH_PRIOR` pixels of reprojection error at every
+/// observation (chosen on CMU 131/85 windows: 0 lets the length drift to its bounds, 1
+/// pins it to the given, possibly wrong, value).
+pub const LENGTH_PRIOR: f64 = 0.3;
+
 /// Settings of [`reconstruct_articulated`].
 #[derive(Debug, Clone, Copy)]
 pub struct ArticulatedOptions {
@@ -35,6 +55,20 @@ pub struct ArticulatedOptions {
     /// at least once near perpendicular to the viewing ray, and makes the reconstruction
     /// robust to over-estimated lengths and root error (see the report of issue 4).
     pub fit_radius: bool,
+    pub method: ArticulatedMethod,
+    /// Robust method: the shrunk BQP sphere has the radius of this quantile (in `[0, 1]`)
+    /// of the parent-to-ray distances over the observed frames (never above the thesis
+    /// radius).
+    pub tangent_quantile: f64,
+    /// Robust method: the bone length is refined within `[r/(1+tol), r(1+tol)]` of the
+    /// thesis radius `r`, with a Gaussian prior of relative deviation `tol` about `r`
+    /// (weight [`LENGTH_PRIOR`]); 0 keeps it fixed.
+    pub length_tol: f64,
+    /// Robust method: rays whose two roots' unit directions are closer than this (a local
+    /// minimum in time) are grazing points where passing to the other root is also tried.
+    pub grazing_separation: f64,
+    /// Robust method: rounds of the greedy search over those passes (0 = none).
+    pub flip_rounds: usize,
 }
 
 impl Default for ArticulatedOptions {
@@ -48,6 +82,11 @@ impl Default for ArticulatedOptions {
             },
             bqp: BqpOptions::default(),
             fit_radius: false,
+            method: ArticulatedMethod::Robust,
+            tangent_quantile: 0.8,
+            length_tol: 0.1,
+            grazing_separation: 1.0,
+            flip_rounds: 3,
         }
     }
 }
@@ -57,9 +96,11 @@ impl Default for ArticulatedOptions {
 pub struct ArticulatedResult {
     /// Child position at every frame (missing frames imputed), world metres.
     pub points: Vec<Vector3<f64>>,
-    /// Bone length used: the given length, enlarged so that every ray meets the sphere
-    /// (Sec 4.4.1).
+    /// Bone length of the result: the given length enlarged so that every ray meets the
+    /// sphere (Sec 4.4.1), then refined within `length_tol` by the robust method.
     pub radius: f64,
+    /// Radius of the sphere whose binary program gave the returned trajectory.
+    pub bqp_radius: f64,
     /// Rows: the spherical frame (`e1`, `e2`, pole) in world coordinates.
     pub frame: Matrix3<f64>,
     /// DCT coefficients of the inclination `θ(t)` and azimuth `φ(t)` (radians).
@@ -137,42 +178,73 @@ fn validate_common(
     Ok(())
 }
 
-/// Both ray–sphere intersections per observed frame (Eq 4.8–4.9), after enlarging the
-/// radius to the largest parent-to-ray distance when some ray misses (Sec 4.4.1), or
-/// setting it to that distance when `fit_radius`. A candidate behind the camera is
-/// replaced by the other one.
-pub fn candidates(
+/// The observed frames, their viewing rays and the parent-to-ray distances.
+struct Rays {
+    frames: Vec<usize>,
+    dirs: Vec<Vector3<f64>>,
+    dist: Vec<f64>,
+}
+
+fn observed_rays(
     cameras: &[Camera],
     pixels: &[Option<Vector2<f64>>],
     parent: &[Vector3<f64>],
-    length: f64,
-    fit_radius: bool,
-) -> Result<Candidates> {
-    let mut frames = Vec::new();
-    let mut rays = Vec::new();
-    let mut farthest: f64 = 0.0;
+) -> Rays {
+    let mut rays = Rays {
+        frames: Vec::new(),
+        dirs: Vec::new(),
+        dist: Vec::new(),
+    };
     for (i, u) in pixels.iter().enumerate() {
         if let Some(u) = u {
             let v = cameras[i].ray_direction(u);
-            farthest = farthest.max(line_point_distance(&cameras[i].c, &v, &parent[i]));
-            frames.push(i);
-            rays.push(v);
+            rays.dist
+                .push(line_point_distance(&cameras[i].c, &v, &parent[i]));
+            rays.frames.push(i);
+            rays.dirs.push(v);
         }
     }
-    let radius = if fit_radius && farthest > 0.0 {
+    rays
+}
+
+/// The radius of the thesis: `length` enlarged to the largest parent-to-ray distance so
+/// that every ray meets the sphere (Sec 4.4.1), or that distance when `fit_radius`.
+fn thesis_radius(dist: &[f64], length: f64, fit_radius: bool) -> f64 {
+    let farthest = dist.iter().copied().fold(0.0, f64::max);
+    if fit_radius && farthest > 0.0 {
         farthest
     } else {
         length.max(farthest)
-    };
-    let mut chi1 = Vec::with_capacity(frames.len());
-    let mut chi2 = Vec::with_capacity(frames.len());
-    for (&i, v) in frames.iter().zip(&rays) {
+    }
+}
+
+/// The `q`-quantile of `values` (linear interpolation; `values` non-empty).
+fn quantile(values: &[f64], q: f64) -> f64 {
+    let mut v = values.to_vec();
+    v.sort_by(f64::total_cmp);
+    let pos = q.clamp(0.0, 1.0) * (v.len() - 1) as f64;
+    let lo = pos.floor() as usize;
+    let hi = pos.ceil() as usize;
+    v[lo] + (v[hi] - v[lo]) * (pos - lo as f64)
+}
+
+/// Both intersections of every observed ray with the sphere of `radius` about the parent
+/// (Eq 4.8–4.9). A ray that misses the sphere (complex roots) gets its point nearest to
+/// the parent twice; a candidate behind the camera is replaced by the other one.
+fn candidates_at(
+    cameras: &[Camera],
+    parent: &[Vector3<f64>],
+    rays: &Rays,
+    radius: f64,
+) -> Candidates {
+    let mut chi1 = Vec::with_capacity(rays.frames.len());
+    let mut chi2 = Vec::with_capacity(rays.frames.len());
+    for (&i, v) in rays.frames.iter().zip(&rays.dirs) {
         let c = cameras[i].c;
         let xp = parent[i];
         let (s1, s2) = match ray_sphere(&c, v, &xp, radius) {
             Some(s) => s,
             None => {
-                // Tangent within rounding: the closest point of the line.
                 let s = v.dot(&(xp - c)) / v.norm_squared();
                 (s, s)
             }
@@ -194,14 +266,28 @@ pub fn candidates(
         chi1.push(unit(s1));
         chi2.push(unit(s2));
     }
-    Ok(Candidates {
-        frames,
+    Candidates {
+        frames: rays.frames.clone(),
         chi1,
         chi2,
         radius,
-    })
+    }
 }
 
+/// Both ray–sphere intersections per observed frame (Eq 4.8–4.9) on the sphere of the
+/// thesis: the radius is enlarged to the largest parent-to-ray distance when some ray
+/// misses (Sec 4.4.1), or set to that distance when `fit_radius`.
+pub fn candidates(
+    cameras: &[Camera],
+    pixels: &[Option<Vector2<f64>>],
+    parent: &[Vector3<f64>],
+    length: f64,
+    fit_radius: bool,
+) -> Result<Candidates> {
+    let rays = observed_rays(cameras, pixels, parent);
+    let radius = thesis_radius(&rays.dist, length, fit_radius);
+    Ok(candidates_at(cameras, parent, &rays, radius))
+}
 /// Orthonormal basis of the span of the observed rows of `Θ` (thin QR), `n_obs × K`.
 fn observed_basis(theta_obs: &DMatrix<f64>) -> Result<DMatrix<f64>> {
     let (m, k) = theta_obs.shape();
@@ -309,6 +395,147 @@ fn least_squares(theta_obs: &DMatrix<f64>, y: &DVector<f64>) -> Result<DVector<f
         .map_err(|e| Error::degenerate(format!("basis least squares failed: {e}")))
 }
 
+/// The binary program of Eq 4.12 solved on the sphere of one radius: the candidates, the
+/// solution, and the chosen root per observed frame (`true` = `¹χ`, the farther one).
+struct Program {
+    cand: Candidates,
+    bqp: BqpSolution,
+    bqp_size: usize,
+    choice: Vec<bool>,
+    /// Observed positions (indices into `cand.frames`) in time order.
+    order: Vec<usize>,
+}
+
+fn solve_program(
+    cameras: &[Camera],
+    parent: &[Vector3<f64>],
+    rays: &Rays,
+    radius: f64,
+    theta: &DMatrix<f64>,
+    times: &[f64],
+    bqp: &BqpOptions,
+) -> Result<Program> {
+    let cand = candidates_at(cameras, parent, rays, radius);
+    let m = cand.frames.len();
+    let (problem, _constant, amb) = articulated_qp(&cand, theta)?;
+    let sol = solve_bqp(&problem, bqp)?;
+    // χ = E b + F (Eq 4.11): b = 1 picks ¹χ.
+    let mut choice = vec![false; m];
+    for (i, &a) in amb.iter().enumerate() {
+        choice[a] = sol.x[i];
+    }
+    let mut order: Vec<usize> = (0..m).collect();
+    order.sort_by(|&a, &b| times[cand.frames[a]].total_cmp(&times[cand.frames[b]]));
+    Ok(Program {
+        cand,
+        bqp_size: problem.n(),
+        bqp: sol,
+        choice,
+        order,
+    })
+}
+
+/// Positions in `order` where the ray grazes the sphere: local minima in time of the
+/// separation `‖¹χ − ²χ‖` of the two roots (a plateau of tangent rays counts once, at its
+/// middle) below `max_sep`. There the true trajectory can pass from one root to the other
+/// (it crosses the plane perpendicular to the ray) or touch it and come back; the smooth
+/// program cannot always tell which, so both are tried.
+fn grazing_points(cand: &Candidates, order: &[usize], max_sep: f64) -> Vec<usize> {
+    let sep: Vec<f64> = order
+        .iter()
+        .map(|&a| (cand.chi1[a] - cand.chi2[a]).norm())
+        .collect();
+    let n = sep.len();
+    let mut out = Vec::new();
+    let mut r = 0;
+    while r < n {
+        let mut e = r;
+        while e + 1 < n && (sep[e + 1] - sep[r]).abs() <= 1e-9 {
+            e += 1;
+        }
+        let lower_left = r == 0 || sep[r - 1] > sep[r];
+        let lower_right = e + 1 == n || sep[e + 1] > sep[r];
+        if lower_left && lower_right && sep[r] < max_sep && r > 0 && e + 1 < n {
+            out.push((r + e) / 2);
+        }
+        r = e + 1;
+    }
+    out
+}
+
+/// Chosen unit directions projected on the spherical basis (Eq 4.4, with unwrapping):
+/// the spherical frame and the DCT coefficients of both angles.
+fn project_choice(
+    cand: &Candidates,
+    choice: &[bool],
+    order: &[usize],
+    theta: &DMatrix<f64>,
+    k: usize,
+) -> Result<(Matrix3<f64>, DVector<f64>, DVector<f64>)> {
+    let m = cand.frames.len();
+    let chi: Vec<Vector3<f64>> = (0..m)
+        .map(|a| {
+            if choice[a] {
+                cand.chi1[a]
+            } else {
+                cand.chi2[a]
+            }
+        })
+        .collect();
+    let frame = spherical_frame(&chi);
+    let raw: Vec<(f64, f64)> = order.iter().map(|&a| to_angles(&frame, &chi[a])).collect();
+    let unwrapped = unwrap_angles(&raw);
+    let theta_obs = DMatrix::from_fn(m, k, |r, j| theta[(cand.frames[order[r]], j)]);
+    let yt = DVector::from_fn(m, |r, _| unwrapped[r].0);
+    let yp = DVector::from_fn(m, |r, _| unwrapped[r].1);
+    Ok((
+        frame,
+        least_squares(&theta_obs, &yt)?,
+        least_squares(&theta_obs, &yp)?,
+    ))
+}
+
+/// The reprojection objective of Eq 4.5 for one joint in the spherical parameterisation
+/// of Eq 4.4: angles `Θ a_θ`, `Θ a_φ` in `frame`, radius `r` about the parent.
+struct Fit<'a> {
+    cameras: &'a [Camera],
+    obs: &'a [(usize, Vector2<f64>)],
+    parent: &'a [Vector3<f64>],
+    theta: &'a DMatrix<f64>,
+    frame: Matrix3<f64>,
+    /// Prior on the bone length `(r0, w)`: adds `(w (r − r0) / r0)²` to the cost.
+    prior: Option<(f64, f64)>,
+}
+
+impl Fit<'_> {
+    fn point(&self, i: usize, at: &DVector<f64>, ap: &DVector<f64>, r: f64) -> Vector3<f64> {
+        let row = self.theta.row(i);
+        let th = row.dot(&at.transpose());
+        let ph = row.dot(&ap.transpose());
+        self.parent[i] + from_angles(&self.frame, th, ph) * r
+    }
+
+    /// Sum of squared reprojection errors, pixels².
+    fn cost(&self, at: &DVector<f64>, ap: &DVector<f64>, r: f64) -> f64 {
+        self.obs
+            .iter()
+            .map(|&(i, u)| {
+                let (p, _) = self.cameras[i].project(&self.point(i, at, ap, r));
+                (p - u).norm_squared()
+            })
+            .sum::<f64>()
+            + self
+                .prior
+                .map_or(0.0, |(r0, w)| (w * (r - r0) / r0).powi(2))
+    }
+}
+
+/// Outcome of [`refine`]: coefficients, radius, iterations, converged.
+type Refined = (DVector<f64>, DVector<f64>, f64, usize, bool);
+
+/// A refined choice of roots: cost, spherical frame, fit.
+type Evaluated = (f64, Matrix3<f64>, Refined);
+
 /// Reconstructs one articulated trajectory (Eq 4.5–4.12): `pixels[i]` is the child's pixel
 /// in `cameras[i]` at `times[i]` (`None` = missing), `parent[i]` the parent's world position.
 pub fn reconstruct_articulated(
@@ -323,81 +550,145 @@ pub fn reconstruct_articulated(
     if opts.k == 0 {
         return Err(Error::invalid("k", "must be at least 1"));
     }
+    if !(0.0..=1.0).contains(&opts.tangent_quantile) {
+        return Err(Error::invalid(
+            "tangent_quantile",
+            format!("must be in [0, 1], got {}", opts.tangent_quantile),
+        ));
+    }
+    if !(opts.length_tol.is_finite() && opts.length_tol >= 0.0) {
+        return Err(Error::invalid(
+            "length_tol",
+            format!("must be finite and non-negative, got {}", opts.length_tol),
+        ));
+    }
     let f = cameras.len();
     let span = DctSpan::from_times(times)?;
     let theta = span.matrix(times, opts.k)?;
-    let cand = candidates(cameras, pixels, parent, length, opts.fit_radius)?;
-    let m = cand.frames.len();
+    let rays = observed_rays(cameras, pixels, parent);
+    let m = rays.frames.len();
     if m < opts.k {
         return Err(Error::degenerate(format!(
             "{m} observed frames cannot determine k = {} basis coefficients",
             opts.k
         )));
     }
-    let (problem, _constant, amb) = articulated_qp(&cand, &theta)?;
-    let sol = solve_bqp(&problem, &opts.bqp)?;
-    // χ = E b + F (Eq 4.11): b = 1 picks ¹χ.
-    let mut chi = cand.chi2.clone();
-    for (i, &a) in amb.iter().enumerate() {
-        if sol.x[i] {
-            chi[a] = cand.chi1[a];
+    let r_thesis = thesis_radius(&rays.dist, length, opts.fit_radius);
+    let robust = opts.method == ArticulatedMethod::Robust;
+    let mut radii = Vec::with_capacity(2);
+    if robust {
+        let shrunk = quantile(&rays.dist, opts.tangent_quantile).min(r_thesis);
+        if shrunk > 0.0 && shrunk < r_thesis * (1.0 - 1e-9) {
+            radii.push(shrunk);
         }
     }
-
-    // Projection on the spherical basis with unwrapping, in time order.
-    let frame = spherical_frame(&chi);
-    let mut order: Vec<usize> = (0..m).collect();
-    order.sort_by(|&a, &b| times[cand.frames[a]].total_cmp(&times[cand.frames[b]]));
-    let raw: Vec<(f64, f64)> = order.iter().map(|&a| to_angles(&frame, &chi[a])).collect();
-    let unwrapped = unwrap_angles(&raw);
-    let k = opts.k;
-    let theta_obs = DMatrix::from_fn(m, k, |r, j| theta[(cand.frames[order[r]], j)]);
-    let yt = DVector::from_fn(m, |r, _| unwrapped[r].0);
-    let yp = DVector::from_fn(m, |r, _| unwrapped[r].1);
-    let mut at = least_squares(&theta_obs, &yt)?;
-    let mut ap = least_squares(&theta_obs, &yp)?;
-
-    let obs: Vec<(usize, Vector2<f64>)> = order
+    radii.push(r_thesis);
+    let bounds = (robust && opts.length_tol > 0.0).then(|| {
+        (
+            r_thesis / (1.0 + opts.length_tol),
+            r_thesis * (1.0 + opts.length_tol),
+        )
+    });
+    let obs: Vec<(usize, Vector2<f64>)> = rays
+        .frames
         .iter()
-        .filter_map(|&a| {
-            let i = cand.frames[a];
-            pixels[i].map(|u| (i, u))
-        })
+        .filter_map(|&i| pixels[i].map(|u| (i, u)))
         .collect();
-    let radius = cand.radius;
-    let point = |i: usize, at: &DVector<f64>, ap: &DVector<f64>| -> Vector3<f64> {
-        let row = theta.row(i);
-        let th = row.dot(&at.transpose());
-        let ph = row.dot(&ap.transpose());
-        parent[i] + from_angles(&frame, th, ph) * radius
-    };
-    let cost = |at: &DVector<f64>, ap: &DVector<f64>| -> f64 {
-        obs.iter()
-            .map(|&(i, u)| {
-                let (p, _) = cameras[i].project(&point(i, at, ap));
-                (p - u).norm_squared()
-            })
-            .sum()
-    };
 
-    let mut lm_iterations = 0;
-    let mut converged = true;
-    if opts.refine {
-        (at, ap, lm_iterations, converged) = refine(
-            cameras, &obs, parent, &theta, &frame, radius, at, ap, &opts.lm, &cost,
-        );
+    // (cost, frame, refined, BQP solution, its size, its radius)
+    type Best = (f64, Matrix3<f64>, Refined, BqpSolution, usize, f64);
+    let mut best: Option<Best> = None;
+    // A length off by `length_tol` costs LENGTH_PRIOR² px² per observation.
+    let prior = bounds.map(|_| {
+        (
+            r_thesis,
+            LENGTH_PRIOR * (obs.len() as f64).sqrt() / opts.length_tol,
+        )
+    });
+    // Projection of a choice of roots on the basis, refined (Eq 4.5): (cost, frame, fit).
+    let evaluate = |prog: &Program, choice: &[bool]| -> Result<(f64, Matrix3<f64>, Refined)> {
+        let (frame, at, ap) = project_choice(&prog.cand, choice, &prog.order, &theta, opts.k)?;
+        let fit = Fit {
+            cameras,
+            obs: &obs,
+            parent,
+            theta: &theta,
+            frame,
+            prior,
+        };
+        let refined = if opts.refine {
+            refine(&fit, at, ap, r_thesis, bounds, &opts.lm)?
+        } else {
+            (at, ap, r_thesis, 0, true)
+        };
+        let c = fit.cost(&refined.0, &refined.1, refined.2);
+        Ok((
+            if c.is_finite() { c } else { f64::INFINITY },
+            frame,
+            refined,
+        ))
+    };
+    for radius in radii {
+        crate::interrupt::check()?;
+        let prog = solve_program(cameras, parent, &rays, radius, &theta, times, &opts.bqp)?;
+        let mut choice = prog.choice.clone();
+        let mut current = evaluate(&prog, &choice)?;
+        if robust {
+            // Greedy search over passing to the other root after or before each grazing
+            // frame, judged by the refined reprojection error.
+            let graze = grazing_points(&prog.cand, &prog.order, opts.grazing_separation);
+            for _ in 0..opts.flip_rounds {
+                let mut improved: Option<(Vec<bool>, Evaluated)> = None;
+                for &g in &graze {
+                    for part in [&prog.order[g + 1..], &prog.order[..g]] {
+                        crate::interrupt::check()?;
+                        let mut variant = choice.clone();
+                        for &a in part {
+                            variant[a] = !variant[a];
+                        }
+                        let e = evaluate(&prog, &variant)?;
+                        let bar = improved.as_ref().map_or(current.0, |(_, b)| b.0);
+                        if e.0 < bar {
+                            improved = Some((variant, e));
+                        }
+                    }
+                }
+                match improved {
+                    Some((v, e)) => {
+                        choice = v;
+                        current = e;
+                    }
+                    None => break,
+                }
+            }
+        }
+        if best.as_ref().map_or(true, |b| current.0 < b.0) {
+            let (c, frame, refined) = current;
+            best = Some((c, frame, refined, prog.bqp.clone(), prog.bqp_size, radius));
+        }
     }
-    let points: Vec<Vector3<f64>> = (0..f).map(|i| point(i, &at, &ap)).collect();
-    let c = cost(&at, &ap);
-    let reprojection_rms = (c / obs.len().max(1) as f64).sqrt();
+    let (c, frame, (at, ap, radius, lm_iterations, converged), bqp, bqp_size, bqp_radius) =
+        best.ok_or_else(|| Error::degenerate("no start of the reconstruction"))?;
+    let fit = Fit {
+        cameras,
+        obs: &obs,
+        parent,
+        theta: &theta,
+        frame,
+        prior,
+    };
+    let points: Vec<Vector3<f64>> = (0..f).map(|i| fit.point(i, &at, &ap, radius)).collect();
+    let pixel_cost = c - prior.map_or(0.0, |(r0, w)| (w * (radius - r0) / r0).powi(2));
+    let reprojection_rms = (pixel_cost.max(0.0) / obs.len().max(1) as f64).sqrt();
     Ok(ArticulatedResult {
         points,
         radius,
+        bqp_radius,
         frame,
         coeffs_theta: at.iter().copied().collect(),
         coeffs_phi: ap.iter().copied().collect(),
-        bqp_size: problem.n(),
-        bqp: sol,
+        bqp_size,
+        bqp,
         n_observed: m,
         reprojection_rms,
         lm_iterations,
@@ -405,43 +696,44 @@ pub fn reconstruct_articulated(
     })
 }
 
-/// Levenberg–Marquardt on Eq 4.5 over the `2K` angle coefficients, bone length fixed.
-#[allow(clippy::too_many_arguments)]
+/// Levenberg–Marquardt on Eq 4.5 over the `2K` angle coefficients, and the bone length
+/// when `bounds` is given (kept within them by projection).
 fn refine(
-    cameras: &[Camera],
-    obs: &[(usize, Vector2<f64>)],
-    parent: &[Vector3<f64>],
-    theta: &DMatrix<f64>,
-    frame: &Matrix3<f64>,
-    radius: f64,
+    fit: &Fit<'_>,
     mut at: DVector<f64>,
     mut ap: DVector<f64>,
+    mut radius: f64,
+    bounds: Option<(f64, f64)>,
     opts: &LmOptions,
-    cost_of: &dyn Fn(&DVector<f64>, &DVector<f64>) -> f64,
-) -> (DVector<f64>, DVector<f64>, usize, bool) {
+) -> Result<Refined> {
     let k = at.len();
-    let np = 2 * k;
-    let mut cost = cost_of(&at, &ap);
+    let free_r = bounds.is_some();
+    let np = 2 * k + usize::from(free_r);
+    let clamp_r = |r: f64| bounds.map_or(r, |(lo, hi)| r.clamp(lo, hi));
+    radius = clamp_r(radius);
+    let mut cost = fit.cost(&at, &ap, radius);
     if !cost.is_finite() {
-        return (at, ap, 0, false);
+        return Ok((at, ap, radius, 0, false));
     }
-    let ft = frame.transpose();
+    let ft = fit.frame.transpose();
     let mut lambda = 1e-3;
     for it in 0..opts.max_iterations {
+        crate::interrupt::check()?;
         let mut jtj = DMatrix::<f64>::zeros(np, np);
         let mut jtr = DVector::<f64>::zeros(np);
         let mut jrow_u = DVector::<f64>::zeros(np);
         let mut jrow_v = DVector::<f64>::zeros(np);
-        for &(i, u) in obs {
-            let row = theta.row(i);
+        for &(i, u) in fit.obs {
+            let row = fit.theta.row(i);
             let th = row.dot(&at.transpose());
             let ph = row.dot(&ap.transpose());
             let (st, ct) = th.sin_cos();
             let (sp, cp) = ph.sin_cos();
-            let x = parent[i] + ft * Vector3::new(st * cp, st * sp, ct) * radius;
+            let dir = ft * Vector3::new(st * cp, st * sp, ct);
+            let x = fit.parent[i] + dir * radius;
             let dth = ft * Vector3::new(ct * cp, ct * sp, -st) * radius;
             let dph = ft * Vector3::new(-st * sp, st * cp, 0.0) * radius;
-            let cam = &cameras[i];
+            let cam = &fit.cameras[i];
             let kr = cam.k * cam.r;
             let h = kr * (x - cam.c);
             let (pu, pv) = (h.x / h.z, h.y / h.z);
@@ -456,14 +748,23 @@ fn refine(
                 jrow_v[j] = vt * row[j];
                 jrow_v[k + j] = vp * row[j];
             }
+            if free_r {
+                jrow_u[2 * k] = (ju * dir)[0];
+                jrow_v[2 * k] = (jv * dir)[0];
+            }
             let (ru, rv) = (pu - u.x, pv - u.y);
             jtj.ger(1.0, &jrow_u, &jrow_u, 1.0);
             jtj.ger(1.0, &jrow_v, &jrow_v, 1.0);
             jtr.axpy(ru, &jrow_u, 1.0);
             jtr.axpy(rv, &jrow_v, 1.0);
         }
+        if let (true, Some((r0, w))) = (free_r, fit.prior) {
+            let d = w / r0;
+            jtj[(2 * k, 2 * k)] += d * d;
+            jtr[2 * k] += d * (w * (radius - r0) / r0);
+        }
         if jtr.amax() <= 1e-14 * (1.0 + cost.sqrt()) {
-            return (at, ap, it, true);
+            return Ok((at, ap, radius, it, true));
         }
         let mut improved = false;
         for _ in 0..20 {
@@ -477,26 +778,32 @@ fn refine(
             };
             let nt = &at + step.rows(0, k);
             let npv = &ap + step.rows(k, k);
-            let cn = cost_of(&nt, &npv);
+            let nr = if free_r {
+                clamp_r(radius + step[2 * k])
+            } else {
+                radius
+            };
+            let cn = fit.cost(&nt, &npv, nr);
             if cn.is_finite() && cn <= cost {
                 let rel = (cost - cn) / cost.max(f64::MIN_POSITIVE);
                 at = nt;
                 ap = npv;
+                radius = nr;
                 cost = cn;
                 lambda = (lambda * 0.3).max(1e-12);
                 improved = true;
                 if rel < opts.rel_tol {
-                    return (at, ap, it + 1, true);
+                    return Ok((at, ap, radius, it + 1, true));
                 }
                 break;
             }
             lambda *= 10.0;
         }
         if !improved {
-            return (at, ap, it + 1, true);
+            return Ok((at, ap, radius, it + 1, true));
         }
     }
-    (at, ap, opts.max_iterations, false)
+    Ok((at, ap, radius, opts.max_iterations, false))
 }
 
 /// Reconstructability η_a (Eq 4.13) of a known articulated trajectory: the ratio of the
@@ -690,6 +997,7 @@ pub fn reconstruct_skeleton(
     let mut results: Vec<Option<ArticulatedResult>> = vec![None; nj];
     traj[skeleton.root()] = Some(root.to_vec());
     for &j in &skeleton.order()[1..] {
+        crate::interrupt::check()?;
         let p = skeleton.parents()[j].ok_or_else(|| Error::invalid("parents", "bad order"))?;
         let parent = traj[p]
             .clone()

@@ -87,9 +87,16 @@ fn opts(k: usize) -> ArticulatedOptions {
     }
 }
 
+fn thesis(k: usize) -> ArticulatedOptions {
+    ArticulatedOptions {
+        method: ArticulatedMethod::Thesis,
+        ..opts(k)
+    }
+}
+
 #[test]
 fn recovers_smooth_articulated_trajectory() {
-    // Sec 4.3: the truth wins when η_a > 1, the impostor when η_a < 1.
+    // Sec 4.3 (thesis method): the truth wins when η_a > 1, the impostor when η_a < 1.
     let (mut good, mut bad) = (0, 0);
     for seed in 0..10 {
         let s = scene(60, 0.4, 0.0, seed);
@@ -100,7 +107,7 @@ fn recovers_smooth_articulated_trajectory() {
             &s.parent,
             &s.times,
             s.length,
-            &opts(8),
+            &thesis(8),
         )
         .expect("reconstructs");
         let e = rel_error(&r.points, &s);
