@@ -35,7 +35,7 @@ from hypothesis import HealthCheck, given, settings  # noqa: E402
 from hypothesis import strategies as st  # noqa: E402
 
 from socialcam import _core  # noqa: E402
-from socialcam.articulated import BqpOptions  # noqa: E402
+from socialcam.articulated import ArticulatedOptions, BqpOptions  # noqa: E402
 from socialcam.charges import ChargeOptions  # noqa: E402
 
 ALLOWED: tuple[type[BaseException], ...] = (
@@ -127,6 +127,7 @@ EM_OPTS = dict(
 
 CHARGE_OPTS = dataclasses.asdict(ChargeOptions(seeds_per_ray=5, max_iter=50))
 BQP_OPTS = dataclasses.asdict(BqpOptions(time_limit=5.0, node_limit=1000))
+ART_OPTS = dataclasses.asdict(ArticulatedOptions(k=3, time_limit=5.0, node_limit=10_000))
 
 
 class Opts(dict[str, Any]):
@@ -168,12 +169,22 @@ BASE: dict[str, tuple[list[Any], dict[str, Any]]] = {
     "gaze_angle_to_charges": ([POS, MAG, KAPPA, FRAME, QPTS, V_EYE[:2], 0.3], {}),
     "solve_bqp": ([Q, np.ones(3), Opts(BQP_OPTS)], {}),
     "reconstruct_articulated": (
-        [K, R, C, PIX_CHILD, PARENT, TIMES, 0.4, 3],
-        {"refine": True, "time_limit": 5.0, "node_limit": 10_000, "fit_radius": False},
+        [K, R, C, PIX_CHILD, PARENT, TIMES, 0.4, Opts(ART_OPTS)],
+        {},
     ),
     "reconstruct_skeleton": (
-        [K, R, C, PIX_CHILD[:, None].repeat(2, 1), [-1, 0], [0.0, 0.4], PARENT, TIMES, 3],
-        {"refine": True, "time_limit": 5.0, "node_limit": 10_000},
+        [
+            K,
+            R,
+            C,
+            PIX_CHILD[:, None].repeat(2, 1),
+            [-1, 0],
+            [0.0, 0.4],
+            PARENT,
+            TIMES,
+            Opts(ART_OPTS),
+        ],
+        {},
     ),
     "skeleton_order": ([[-1, 0, 1], [0.0, 0.4, 0.3]], {}),
     "articulated_reconstructability": ([K, R, C, PARENT, CHILD, TIMES, 3], {}),

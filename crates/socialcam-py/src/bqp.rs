@@ -273,8 +273,9 @@ fn reconstruct_articulated<'py>(
     parent: PyReadonlyArray2<'py, f64>,
     times: PyReadonlyArray1<'py, f64>,
     length: f64,
-    options: PyArticulatedOptions,
+    options: Bound<'py, PyAny>,
 ) -> PyResult<Bound<'py, pyo3::types::PyDict>> {
+    let options: PyArticulatedOptions = crate::convert::options(&options, "ArticulatedOptions")?;
     let cams = cameras(&k_mat, &r_mat, &c_mat)?;
     let f = cams.len();
     let px = pixels_2d(&x, f)?;
@@ -301,11 +302,12 @@ fn reconstruct_skeleton<'py>(
     lengths: Vec<f64>,
     root: PyReadonlyArray2<'py, f64>,
     times: PyReadonlyArray1<'py, f64>,
-    options: PyArticulatedOptions,
+    options: Bound<'py, PyAny>,
 ) -> PyResult<(
     Bound<'py, PyArray3<f64>>,
     Vec<Option<Bound<'py, pyo3::types::PyDict>>>,
 )> {
+    let options: PyArticulatedOptions = crate::convert::options(&options, "ArticulatedOptions")?;
     let sk = skeleton(parents, lengths)?;
     let cams = cameras(&k_mat, &r_mat, &c_mat)?;
     let f = cams.len();
