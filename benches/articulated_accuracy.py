@@ -113,7 +113,7 @@ def run(
     parent = w.P[:, p] + smooth_offset(F, root * r, rng)
     out = sc.reconstruct_articulated(x, w.cams, parent, r * scale, k=K_DCT, method=method)
     den = w.P[:, j] if world else w.P[:, j] - w.P[:, p]
-    return float(np.linalg.norm(out.X - w.P[:, j]) / np.linalg.norm(den))
+    return float(np.linalg.norm(out.points - w.P[:, j]) / np.linalg.norm(den))
 
 
 def main() -> None:

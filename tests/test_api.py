@@ -278,10 +278,9 @@ def test_options_are_keyword_only(fn, first_option):
 
 OLD_NAMES = {"max_iterations", "filter", "X", "reprojection_rms", "observed"}
 #: Owned by i12-artic (articulated.py): X → points, reprojection_rms → rms there.
-OTHER_BRANCH_NAMES = {"ArticulatedTrajectory", "SkeletonReconstruction"}
+OTHER_BRANCH_NAMES: set[str] = set()
 
 
-@pytest.mark.xfail(strict=True, reason="i12-artic: X → points, reprojection_rms → rms")
 def test_articulated_results_use_the_new_names():
     fields = {
         f.name

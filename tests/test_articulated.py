@@ -156,7 +156,7 @@ def _run(
     out = sc.reconstruct_articulated(
         x, scene.cams, parent, r * scale, k=scene.k, fit_radius=fit, method=method
     )
-    return out, scene.rel_error(out.X, j)
+    return out, scene.rel_error(out.points, j)
 
 
 def test_error_is_low_when_reconstructability_is_high(scene: Scene) -> None:
@@ -204,7 +204,7 @@ def test_five_percent_missing_data(scene: Scene) -> None:
     errs = [_run(scene, j, scale=0.95, missing=0.05)[1] for j in good]
     assert np.median(errs) < 0.06, errs
     out, _ = _run(scene, good[0], missing=0.05)
-    assert out.X.shape == (60, 3) and np.isfinite(out.X).all()
+    assert out.points.shape == (60, 3) and np.isfinite(out.points).all()
 
 
 def test_fitted_radius_under_thesis_conditions(scene: Scene) -> None:
@@ -225,12 +225,12 @@ def test_fitted_radius_under_thesis_conditions(scene: Scene) -> None:
 def test_skeleton_recursive_and_presets(scene: Scene) -> None:
     sk = scene.skeleton
     res = sc.reconstruct_skeleton(scene.px, scene.cams, sk, scene.P[:, 0], k=8, method="thesis")
-    assert res.X.shape == scene.P.shape
+    assert res.points.shape == scene.P.shape
     assert res.joints[sk.root] is None
-    np.testing.assert_allclose(res.X[:, sk.root], scene.P[:, 0])
+    np.testing.assert_allclose(res.points[:, sk.root], scene.P[:, 0])
     # A joint whose chain from the root is reconstructable is recovered.
     j = sk.index("LeftHip")
-    assert scene.rel_error(res.X[:, j], j) < 0.06
+    assert scene.rel_error(res.points[:, j], j) < 0.06
     human = sc.Skeleton.cmu_human(1.8)
     assert human.names[human.root] == "Hips" and len(human.names) == 19
     assert human.lengths[human.index("LeftKnee")] == pytest.approx(0.245 * 1.8)
@@ -270,13 +270,13 @@ def test_robust_refines_the_length_per_joint(scene: Scene) -> None:
         x = scene.px[:, j] + rng.normal(0, 0.5, (scene.P.shape[0], 2))
         out = sc.reconstruct_articulated(x, scene.cams, scene.P[:, p], 1.05 * r, k=8)
         raw = sc.reconstruct_articulated(x, scene.cams, scene.P[:, p], 1.05 * r, k=8, refine=False)
-        err, raw_err = scene.rel_error(out.X, j), scene.rel_error(raw.X, j)
+        err, raw_err = scene.rel_error(out.points, j), scene.rel_error(raw.points, j)
         assert err < limit, (j, err)
         assert abs(out.radius / r - 1) < 0.015, (j, out.radius / r)
         assert err < 0.85 * raw_err, (j, err, raw_err)
         if limit < 0.2:
             # Unbiased: the mean error vector is well below the error (measured ≤ 0.01).
-            bias = np.linalg.norm((out.X - scene.P[:, j]).mean(axis=0)) / r
+            bias = np.linalg.norm((out.points - scene.P[:, j]).mean(axis=0)) / r
             assert bias < 0.5 * limit, (j, bias)
 
 

@@ -182,7 +182,7 @@ class ArticulatedTrajectory:
 
     Attributes
     ----------
-    X : (F, 3) child positions in metres, every frame (missing frames imputed).
+    points : (F, 3) child positions in metres, every frame (missing frames imputed).
     times : (F,) seconds.
     radius : bone length of the result: the given one enlarged so that every ray meets the
         sphere (Sec 4.4.1), then refined within ``length_tol`` by the robust method.
@@ -190,11 +190,11 @@ class ArticulatedTrajectory:
     coeffs_theta, coeffs_phi : (K,) DCT coefficients of the spherical angles (radians).
     bqp_size, bqp_nodes, bqp_optimal, bqp_gap : the binary program of Eq 4.12.
     n_observed : frames with an observation.
-    reprojection_rms : pixels, over the observed frames.
+    rms : reprojection RMS in pixels, over the observed frames.
     converged : the refinement met its tolerance.
     """
 
-    X: FloatArray
+    points: FloatArray
     times: FloatArray
     radius: float
     bqp_radius: float
@@ -205,7 +205,7 @@ class ArticulatedTrajectory:
     bqp_optimal: bool
     bqp_gap: float
     n_observed: int
-    reprojection_rms: float
+    rms: float
     converged: bool
 
     def to_dict(self) -> dict[str, Any]:
@@ -216,7 +216,7 @@ class ArticulatedTrajectory:
 
 def _traj(d: dict[str, Any], times: FloatArray) -> ArticulatedTrajectory:
     return ArticulatedTrajectory(
-        X=d["X"],
+        points=d["X"],
         times=times,
         radius=float(d["radius"]),
         bqp_radius=float(d["bqp_radius"]),
@@ -227,7 +227,7 @@ def _traj(d: dict[str, Any], times: FloatArray) -> ArticulatedTrajectory:
         bqp_optimal=bool(d["bqp_optimal"]),
         bqp_gap=float(d["bqp_gap"]),
         n_observed=int(d["n_observed"]),
-        reprojection_rms=float(d["reprojection_rms"]),
+        rms=float(d["reprojection_rms"]),
         converged=bool(d["converged"]),
     )
 
@@ -527,16 +527,16 @@ class SkeletonReconstruction:
 
     Attributes
     ----------
-    X : (F, J, 3) joint positions, metres.
+    points : (F, J, 3) joint positions, metres.
     joints : per joint, its :class:`ArticulatedTrajectory` diagnostics (``None`` for the root).
     """
 
-    X: FloatArray
+    points: FloatArray
     joints: tuple[ArticulatedTrajectory | None, ...]
 
     def to_dict(self) -> dict[str, Any]:
         return {
-            "X": self.X.tolist(),
+            "points": self.points.tolist(),
             "joints": [None if j is None else j.to_dict() for j in self.joints],
         }
 

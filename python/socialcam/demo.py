@@ -122,10 +122,10 @@ def _stage_articulated(seed: int, out: Path, plots: bool) -> dict[str, Any]:
     t0 = time.perf_counter()
     res = reconstruct_skeleton(np.transpose(x, (1, 0, 2)), cams, skeleton, P[:, 0], k=8)
     dt = time.perf_counter() - t0
-    err = np.linalg.norm(res.X - P, axis=2)[:, 1:]
+    err = np.linalg.norm(res.points - P, axis=2)[:, 1:]
     par = np.asarray(skeleton.parents[1:])
     bone_true = P[:, 1:] - P[:, par]
-    bone_est = res.X[:, 1:] - res.X[:, par]
+    bone_est = res.points[:, 1:] - res.points[:, par]
     rel = np.linalg.norm(bone_est - bone_true, axis=2) / np.linalg.norm(bone_true, axis=2)
     return {
         "joints": len(skeleton.names),
