@@ -866,6 +866,9 @@ def reconstruct_videos(
     lap("features")
 
     by_video = [[(images[n].image_id, n) for n in kfs if n in images] for kfs in kf_names]
+    # COLMAP's RANSAC draws from a process-wide generator seeded from the clock unless set.
+    if hasattr(pycolmap, "set_random_seed"):
+        pycolmap.set_random_seed(opts.seed)
     pairs = _retrieval_pairs(
         db_path, by_video, opts.sequential_overlap, opts.cross_pairs, opts.seed
     )
