@@ -135,7 +135,54 @@ fn deviation(
     Some((d - vi * depth) / depth)
 }
 
+/// `(p, y, v)` moved by the parameter step `d` (p: 0..3, y: 3..6, v tangent: 6..8).
+fn apply_step(
+    p: &Vector3<f64>,
+    y: &Vector3<f64>,
+    v: &Vector3<f64>,
+    d: &Vec8,
+) -> (Vector3<f64>, Vector3<f64>, Vector3<f64>) {
+    (
+        p + Vector3::new(d[0], d[1], d[2]),
+        y + Vector3::new(d[3], d[4], d[5]),
+        rotate_dir(v, &Vector2::new(d[6], d[7])),
+    )
+}
+
 impl Segment<'_> {
+    /// Central-difference Jacobian of [`Self::residuals`] (8 columns; the residual is
+    /// cheap) into `jac`; false when a perturbed point leaves the front of a camera.
+    #[allow(clippy::too_many_arguments)]
+    fn jacobian(
+        &self,
+        p: &Vector3<f64>,
+        y: &Vector3<f64>,
+        v: &Vector3<f64>,
+        sqrt_lambda: (f64, f64),
+        scale: f64,
+        jac: &mut [Vec8],
+        rp: &mut Vec<f64>,
+        rm: &mut Vec<f64>,
+    ) -> bool {
+        for k in 0..NP {
+            let hstep = if k < 6 { 1e-6 * scale } else { 1e-6 };
+            let mut d = Vec8::zeros();
+            d[k] = hstep;
+            let (pp, yp, vp) = apply_step(p, y, v, &d);
+            d[k] = -hstep;
+            let (pm, ym, vm) = apply_step(p, y, v, &d);
+            if !self.residuals(&pp, &yp, &vp, sqrt_lambda, rp)
+                || !self.residuals(&pm, &ym, &vm, sqrt_lambda, rm)
+            {
+                return false;
+            }
+            for (row, (a, b)) in jac.iter_mut().zip(rp.iter().zip(rm.iter())) {
+                row[k] = (a - b) / (2.0 * hstep);
+            }
+        }
+        true
+    }
+
     /// Residual vector (3 per frame, then 3 for the prior) at `(p, y, v)`.
     fn residuals(
         &self,
@@ -255,33 +302,12 @@ pub fn calibrate_gaze(
     let mut jac = vec![Vec8::zeros(); 3 * f + 4];
     let mut rp = Vec::with_capacity(3 * f + 4);
     let mut rm = Vec::with_capacity(3 * f + 4);
-    let apply = |p: &Vector3<f64>, y: &Vector3<f64>, v: &Vector3<f64>, d: &Vec8| {
-        (
-            p + Vector3::new(d[0], d[1], d[2]),
-            y + Vector3::new(d[3], d[4], d[5]),
-            rotate_dir(v, &Vector2::new(d[6], d[7])),
-        )
-    };
     let scale = 1.0 + y.norm();
     'outer: while iterations < opts.max_iter {
         interrupt::check()?;
         iterations += 1;
-        // Central-difference Jacobian (8 columns; the residual is cheap).
-        for k in 0..NP {
-            let hstep = if k < 6 { 1e-6 * scale } else { 1e-6 };
-            let mut d = Vec8::zeros();
-            d[k] = hstep;
-            let (pp, yp, vp) = apply(&p, &y, &v, &d);
-            d[k] = -hstep;
-            let (pm, ym, vm) = apply(&p, &y, &v, &d);
-            if !seg.residuals(&pp, &yp, &vp, sqrt_lambda, &mut rp)
-                || !seg.residuals(&pm, &ym, &vm, sqrt_lambda, &mut rm)
-            {
-                break 'outer;
-            }
-            for (row, (a, b)) in jac.iter_mut().zip(rp.iter().zip(&rm)) {
-                row[k] = (a - b) / (2.0 * hstep);
-            }
+        if !seg.jacobian(&p, &y, &v, sqrt_lambda, scale, &mut jac, &mut rp, &mut rm) {
+            break 'outer;
         }
         let mut jtj = Mat8::zeros();
         let mut jtr = Vec8::zeros();
@@ -299,7 +325,7 @@ pub fn calibrate_gaze(
                 lambda *= 10.0;
                 continue;
             };
-            let (pn, yn, vn) = apply(&p, &y, &v, &step);
+            let (pn, yn, vn) = apply_step(&p, &y, &v, &step);
             if seg.residuals(&pn, &yn, &vn, sqrt_lambda, &mut rp) {
                 let cn = cost_of(&rp);
                 if cn.is_finite() && cn <= cost {
@@ -333,28 +359,17 @@ pub fn calibrate_gaze(
     let dof = (2 * f).saturating_sub(NP).max(1) as f64;
     let sigma2 = data_ss / dof;
     let h = sigma2.sqrt();
-    let mut jtj = Mat8::zeros();
-    for k in 0..NP {
-        let hstep = if k < 6 { 1e-6 * scale } else { 1e-6 };
-        let mut d = Vec8::zeros();
-        d[k] = hstep;
-        let (pp, yp, vp) = apply(&p, &y, &v, &d);
-        d[k] = -hstep;
-        let (pm, ym, vm) = apply(&p, &y, &v, &d);
-        if seg.residuals(&pp, &yp, &vp, sqrt_lambda, &mut rp)
-            && seg.residuals(&pm, &ym, &vm, sqrt_lambda, &mut rm)
-        {
-            for (row, (a, b)) in jac.iter_mut().zip(rp.iter().zip(&rm)) {
-                row[k] = (a - b) / (2.0 * hstep);
-            }
+    let mut jtj = Mat8::from_element(f64::NAN);
+    if seg.jacobian(&p, &y, &v, sqrt_lambda, scale, &mut jac, &mut rp, &mut rm) {
+        jtj = Mat8::zeros();
+        for row in &jac {
+            jtj += row * row.transpose();
         }
-    }
-    for row in &jac {
-        jtj += row * row.transpose();
     }
     let cov = jtj
         .try_inverse()
         .map(|m| m * sigma2)
+        .filter(|m| m.iter().all(|x| x.is_finite()))
         .unwrap_or_else(|| Mat8::from_element(f64::INFINITY));
     let sd = |i: usize| cov[(i, i)].max(0.0).sqrt();
     Ok(GazeCalibration {
