@@ -11,7 +11,7 @@ pose cannot be trusted is reported with a reason and no pose, never guessed.
 from __future__ import annotations
 
 from dataclasses import dataclass
-from typing import Any
+from typing import Any, ClassVar
 
 import numpy as np
 import numpy.typing as npt
@@ -144,3 +144,67 @@ def solve_pnp(
         return FramePose(None, None, rms, len(idx), f"reprojection RMS {rms:.2f} px")
     R = np.asarray(cv2.Rodrigues(rvec)[0], dtype=np.float64)
     return FramePose(R, np.asarray(tvec, dtype=np.float64).ravel(), rms, len(idx), "")
+
+
+class KeyframeSelector:
+    """Chooses keyframes from the image motion, as visual odometry does.
+
+    Corners found in the last keyframe (half resolution, Shi–Tomasi) are followed frame to
+    frame with pyramidal Lucas–Kanade and a forward–backward check; a frame becomes a
+    keyframe when fewer than ``min_overlap`` of them survive (the view has moved on: a
+    head turn, a cut, a corrupt frame) or ``max_step`` frames after the last keyframe. Fast
+    head turns thus get dense keyframes, which SIFT can register, and the frames between two
+    keyframes always share most of their view with both — what KLT + PnP needs.
+    ``min_overlap = 0`` gives a keyframe every ``max_step`` frames.
+    """
+
+    #: corners per keyframe, their minimum spacing (half-resolution pixels)
+    CORNERS, SPACING = 300, 6
+    _LK: ClassVar[dict[str, Any]] = {"winSize": (15, 15), "maxLevel": 3, "criteria": (3, 20, 0.03)}
+
+    def __init__(self, min_overlap: float, max_step: int) -> None:
+        self.min_overlap, self.max_step = float(min_overlap), int(max_step)
+        self._prev: npt.NDArray[np.uint8] | None = None
+        self._pts = np.zeros((0, 1, 2), np.float32)
+        self._n0 = 0
+        self._since = 0
+
+    def __call__(self, gray: npt.NDArray[np.uint8]) -> bool:
+        """Whether this frame (grey, full resolution; frames in order) is a keyframe."""
+        import cv2
+
+        small = cv2.pyrDown(gray)
+        new = (
+            self._prev is None
+            or self._since + 1 >= self.max_step
+            or small.shape != self._prev.shape
+        )
+        if not new and self.min_overlap > 0:
+            if len(self._pts):
+                p1, st1, _ = cv2.calcOpticalFlowPyrLK(
+                    self._prev, small, self._pts, None, **self._LK
+                )  # type: ignore[call-overload]
+                p0b, st2, _ = cv2.calcOpticalFlowPyrLK(small, self._prev, p1, None, **self._LK)  # type: ignore[call-overload]
+                fb = np.linalg.norm((p0b - self._pts).reshape(-1, 2), axis=1)
+                q = p1.reshape(-1, 2)
+                h, w = small.shape[:2]
+                ok = (
+                    (st1.ravel() == 1)
+                    & (st2.ravel() == 1)
+                    & (fb < 0.5)
+                    & (q[:, 0] >= 0)
+                    & (q[:, 1] >= 0)
+                    & (q[:, 0] <= w - 1)
+                    & (q[:, 1] <= h - 1)
+                )
+                self._pts = np.ascontiguousarray(p1[ok])
+            new = len(self._pts) < self.min_overlap * self._n0
+        self._prev = small
+        if new:
+            c = cv2.goodFeaturesToTrack(small, self.CORNERS, 0.01, self.SPACING)
+            self._pts = np.zeros((0, 1, 2), np.float32) if c is None else c.astype(np.float32)
+            self._n0 = len(self._pts)
+            self._since = 0
+        else:
+            self._since += 1
+        return new

@@ -48,7 +48,10 @@ def main(argv: Sequence[str] | None = None) -> int:
         "--fps", type=float, default=10.0, help="output rate, Hz (default: %(default)s)"
     )
     pz.add_argument(
-        "--keyframe-fps", type=float, default=2.0, help="keyframe rate, Hz (default: %(default)s)"
+        "--keyframe-fps",
+        type=float,
+        default=1.0,
+        help="least keyframe rate, Hz; head turns add keyframes (default: %(default)s)",
     )
     pz.add_argument(
         "--camera-model",

@@ -566,7 +566,10 @@ def _plan_motion(
     # head turns), tight tracking once the target is held (then the primary gaze deviates
     # from the true gaze by the eye-in-head offset only)
     tau_turn, tau_hold, max_rate, settle = 0.1, 0.01, 3.5, 0.6
-    switched = np.vstack([np.ones((1, V), bool), code[1:] != code[:-1]])
+    # A new target is a change of code or a jump of the regarded point (two wall points in a
+    # row keep the code): either starts a rate-limited turn.
+    jump = np.linalg.norm(regard[1:] - regard[:-1], axis=-1) > 0.25
+    switched = np.vstack([np.ones((1, V), bool), (code[1:] != code[:-1]) | jump])
     last = np.maximum.accumulate(np.where(switched, np.arange(G)[:, None], 0), axis=0)
     holding = (np.arange(G)[:, None] - last) * dt > settle
     a_turn, a_hold = 1 - np.exp(-dt / tau_turn), 1 - np.exp(-dt / tau_hold)
@@ -576,7 +579,7 @@ def _plan_motion(
         prev = track[g - 1]
         cosang = np.clip((prev * u[g]).sum(-1), -1.0, 1.0)
         ang = np.arccos(cosang)
-        stepang = np.where(holding[g], ang * a_hold, np.minimum(ang * a_turn, max_rate * dt))
+        stepang = np.minimum(np.where(holding[g], ang * a_hold, ang * a_turn), max_rate * dt)
         perp = u[g] - cosang[:, None] * prev
         pn = np.linalg.norm(perp, axis=-1, keepdims=True)
         perp = np.where(pn > 1e-12, perp / np.maximum(pn, 1e-12), 0.0)
