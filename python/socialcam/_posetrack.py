@@ -199,7 +199,7 @@ class KeyframeSelector:
                 )
                 self._pts = np.ascontiguousarray(p1[ok])
             new = len(self._pts) < self.min_overlap * self._n0
-        self._prev = small
+        self._prev = np.asarray(small, dtype=np.uint8)
         if new:
             c = cv2.goodFeaturesToTrack(small, self.CORNERS, 0.01, self.SPACING)
             self._pts = np.zeros((0, 1, 2), np.float32) if c is None else c.astype(np.float32)
