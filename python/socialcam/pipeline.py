@@ -295,7 +295,7 @@ def load_run_config(path: str | os.PathLike[str]) -> tuple[dict[str, Any], dict[
     ``[t0, t1]``), ``offsets`` (person → seconds), ``known_distance`` (``[a, ta, b, tb,
     metres]``), ``eye_height``. Keys may sit at the top level or in a ``[run]`` table."""
     try:
-        import tomllib
+        import tomllib  # type: ignore[import-not-found,unused-ignore]
     except ImportError:  # Python 3.10
         raise ValueError("config: TOML configs need Python ≥ 3.11 (tomllib)") from None
     try:
@@ -540,7 +540,7 @@ def _pose_at(cams: Cameras, t: FloatArray, max_gap: float) -> tuple[FloatArray, 
     """World→camera rotations ``(T, 3, 3)`` and centres ``(T, 3)`` at times ``t``,
     interpolated (slerp, linear) between the two posed frames around each time when they
     are at most ``max_gap`` seconds apart (exact hits need one frame); NaN elsewhere."""
-    from scipy.spatial.transform import Rotation, Slerp
+    from scipy.spatial.transform import Rotation, Slerp  # type: ignore[import-untyped,unused-ignore]
 
     assert cams.times is not None
     ts = cams.times
@@ -656,6 +656,27 @@ def charges_csv(
     return buf.getvalue()
 
 
+def frames_at(vid: Any, local_times: FloatArray) -> Any:
+    """Streams ``(j, image)``: for each increasing local time ``local_times[j]`` the
+    nearest frame of the open :class:`socialcam.video.Video` ``vid``, decoding it once
+    (a frame may repeat; times beyond the video are skipped)."""
+    ts = vid.timestamps()
+    ok = np.flatnonzero((local_times >= ts[0] - 1e-3) & (local_times <= ts[-1] + 1e-3))
+    if len(ok) == 0:
+        return
+    want = np.abs(ts[None, :] - local_times[ok][:, None]).argmin(axis=1)
+    it = vid.frames(start=float(ts[want[0]]), end=float(ts[want[-1]]) + 1e-6)
+    last = None
+    for j, i in zip(ok, want, strict=True):
+        while last is None or last.index < i:
+            nxt = next(it, None)
+            if nxt is None:
+                break
+            last = nxt
+        if last is not None and last.index >= i:
+            yield int(j), last.image
+
+
 def _overlay_video(
     video: str | os.PathLike[str],
     path: Path,
@@ -680,7 +701,7 @@ def _overlay_video(
 
     colours = [(230, 25, 75), (60, 180, 75), (255, 225, 25), (0, 130, 200), (245, 130, 48),
                (145, 30, 180), (70, 240, 240), (240, 50, 230)]  # fmt: skip
-    with open_video(video) as vid:
+    with open_video(Path(video)) as vid:
         ts_local = vid.timestamps()
         width, height = vid.info.width, vid.info.height
         lo, hi = float(ts_local[0] + offset), float(ts_local[-1] + offset)
@@ -688,23 +709,9 @@ def _overlay_video(
         if len(keep) == 0:
             return 0
 
-        want = np.abs(ts_local[None, :] - (times[keep] - offset)[:, None]).argmin(axis=1)
-
-        def decoded() -> Any:
-            """Per output time the nearest frame (streamed once; a frame may repeat)."""
-            it = vid.frames(start=float(ts_local[want[0]]), end=float(ts_local[want[-1]]) + 1e-6)
-            last = None
-            for i in want:
-                while last is None or last.index < i:
-                    nxt = next(it, None)
-                    if nxt is None:
-                        break
-                    last = nxt
-                if last is not None:
-                    yield last.image
-
         def frames() -> Any:
-            for k, raw in zip(keep, decoded(), strict=False):
+            for j, raw in frames_at(vid, times[keep] - offset):
+                k = int(keep[j])
                 img = raw.copy()
                 if np.isfinite(R[k]).all():
                     for c in charges[k]:

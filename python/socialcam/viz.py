@@ -172,7 +172,7 @@ def plot_charges_over_time(
     tracks: Any,
     names: Any,
     *,
-    segments: dict[str, tuple[float, float]] | None = None,
+    segments: Any = None,
 ) -> Any:
     """Charges over time: above, each charge's magnitude (coloured by track); below, for
     every wearer, the track whose charge it belongs to at each time (calibration segments

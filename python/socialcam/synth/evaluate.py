@@ -45,7 +45,7 @@ def _angle_deg(a: FloatArray, b: FloatArray) -> float:
     return float(np.degrees(np.arccos(np.clip(c, -1.0, 1.0))))
 
 
-def _truth_at(truth: SceneTruth, v: int, times: FloatArray) -> tuple[FloatArray, FloatArray]:
+def _truth_at(truth: SceneTruth, v: int, times: FloatArray) -> tuple[Any, FloatArray]:
     """Index of the true frame nearest to each common-clock time (−1 beyond half a frame)
     and how long the wearer has been looking at the same thing there (s)."""
     ft = truth.frame_times[v] - truth.start[0]
