@@ -90,14 +90,18 @@ def test_joint_attention_against_truth(first, scene):
     res, _out = first
     acc = run_vs_truth(res, scene.truth)
     ja, ref = acc["joint_attention"], acc["joint_attention_true_cameras"]
-    assert ja["groups"] >= 10
-    # THRESHOLDS (measured, see the module docs)
-    assert ja["found_fraction"] >= FOUND_MIN, ja
-    assert acc["error_ratio"] <= RATIO_MAX, acc
+    assert ja["groups"] >= 10 and ref["groups"] == ja["groups"]
+    # Nobody is calibrated here (no range of motion in this scene): the optical axis, which
+    # the renderer pitches 4-12° below the primary gaze, puts the charges ~0.3 m from the
+    # targets. Measured (seed 8, loaded machine): 17 of 22 groups found within 0.5 m, median
+    # 0.319 m; on the true cameras 17 of 22, 0.321 m: ratio 0.99 (issue target ≤ 1.2).
+    assert ja["found_fraction"] >= 0.6, ja
+    assert ja["error_median_m"] < 0.4, ja
+    assert acc["error_ratio"] <= 1.2, acc
 
 
 def test_rerun_resumes_and_reruns_only_what_changed(first, scene):
-    res, out = first
+    _res, out = first
     # everything cached
     again = _run(scene, out)
     assert all(s["cached"] for s in again.report["stages"].values()), again.report["stages"]
@@ -168,3 +172,14 @@ def test_load_run_config(tmp_path):
     assert opts == {"fps": 5, "member_sigma": 2.0} and inputs == {"offsets": {"a": 0.5}}
     with pytest.raises(ValueError, match="config"):
         load_run_config(tmp_path / "nope.toml")
+
+
+def test_view_writes_a_rerun_recording(first, tmp_path):
+    pytest.importorskip("rerun", reason="the optional 'rerun' extra is not installed")
+    from socialcam.view import write_rrd
+
+    _res, out = first
+    path = write_rrd(out, tmp_path / "r.rrd", frames=False)
+    assert path.stat().st_size > 10_000
+    with pytest.raises(ValueError, match="no finished socialcam run"):
+        write_rrd(tmp_path, tmp_path / "x.rrd")
