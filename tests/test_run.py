@@ -155,6 +155,10 @@ def test_cli_bad_input(scene, tmp_path, capsys):
     with pytest.raises(SystemExit):
         main(["run", *vids, "--out", str(tmp_path), "--config", str(cfg)])
     assert "fsp" in capsys.readouterr().err
+    cfg.write_text("[intrinsics.wearer0]\nK = 3\n")
+    with pytest.raises(SystemExit):
+        main(["run", *vids, "--out", str(tmp_path), "--config", str(cfg)])
+    assert "intrinsics" in capsys.readouterr().err
     assert main(["run", *vids, "--out", str(tmp_path), "--calibration", "nobody=1:3"]) == 2
     assert "nobody" in capsys.readouterr().err
     with pytest.raises(ValueError, match="calibration"):

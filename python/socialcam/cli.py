@@ -318,6 +318,15 @@ def _run(parser: argparse.ArgumentParser, args: argparse.Namespace) -> int:
         options["overlays"] = False
     if args.no_plots:
         options["plots"] = False
+    intrinsics = None
+    if inputs.get("intrinsics") is not None:
+        try:
+            intrinsics = {
+                str(person): ([list(map(float, row)) for row in d["K"]], list(d.get("dist", [])))
+                for person, d in inputs["intrinsics"].items()  # type: ignore[attr-defined]
+            }
+        except (KeyError, TypeError, ValueError, AttributeError):
+            parser.error("config: intrinsics: expected [intrinsics.PERSON] with K (3x3) and dist")
     kd = known if known is not None else inputs.get("known_distance")
     eh = args.eye_height if args.eye_height is not None else inputs.get("eye_height")
     try:
@@ -328,6 +337,7 @@ def _run(parser: argparse.ArgumentParser, args: argparse.Namespace) -> int:
                 args.out,
                 calibration=calibration or None,
                 sync=sync or None,
+                intrinsics=intrinsics,
                 known_distance=tuple(kd) if kd is not None else None,  # type: ignore[arg-type]
                 eye_height=eh,  # type: ignore[arg-type]
                 overwrite=args.force,

@@ -293,7 +293,8 @@ def load_run_config(path: str | os.PathLike[str]) -> tuple[dict[str, Any], dict[
     """Reads a ``socialcam run`` TOML config: returns ``(options, inputs)`` where options are
     :class:`RunOptions` fields and inputs the keys ``calibration`` (table person →
     ``[t0, t1]``), ``offsets`` (person → seconds), ``known_distance`` (``[a, ta, b, tb,
-    metres]``), ``eye_height``. Keys may sit at the top level or in a ``[run]`` table."""
+    metres]``), ``eye_height``, ``intrinsics`` (table person → ``{K = [[...], ...], dist =
+    [...]}``, as :func:`socialcam.sfm.reconstruct_videos`). Keys may sit at the top level or in a ``[run]`` table."""
     try:
         import tomllib  # type: ignore[import-not-found,unused-ignore]
     except ImportError:  # Python 3.10
