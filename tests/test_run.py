@@ -61,12 +61,12 @@ def test_outputs_and_report(first, scene):
     for n in names:
         assert (out / f"overlay_{n}.mp4").stat().st_size > 10_000
         assert res.report["overlays"][n] > 0.8 * 6 * res.report["fps"]
-    rows = list(csv.DictReader((out / "gaze.csv").open()))
+    rows = list(csv.DictReader((out / "gaze.csv").read_text().splitlines()))
     assert list(rows[0]) == ["person", "time", "px", "py", "pz", "vx", "vy", "vz", "h"]
     assert {r["person"] for r in rows} == set(names)
     v = np.array([[float(r[k]) for k in ("vx", "vy", "vz")] for r in rows])
     np.testing.assert_allclose(np.linalg.norm(v, axis=1), 1.0, atol=1e-6)
-    ch = list(csv.DictReader((out / "charges.csv").open()))
+    ch = list(csv.DictReader((out / "charges.csv").read_text().splitlines()))
     assert list(ch[0]) == ["time", "track", "x", "y", "z", "magnitude", "members"]
     for r in ch:
         members = r["members"].split(";")
