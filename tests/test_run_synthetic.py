@@ -145,3 +145,17 @@ def test_not_fixating_is_detected():
 
     cal, _summary, why = _calibrate_one(cams, (0.0, 10.0), RunOptions())
     assert why is not None and not cal.calibrated
+
+
+def test_calibration_round_trips_through_json():
+    # the calibration stage caches GazeCalibration as JSON (NaN written as null)
+    import json
+
+    from socialcam import GazeCalibration, calibrate_gaze
+    from socialcam.io import _jsonable
+
+    for cal in (calibrate_gaze(synth.fixation_segment(50, seed=1).cameras),
+                GazeCalibration.optical_axis(0.04)):  # fmt: skip
+        back = GazeCalibration.from_dict(json.loads(json.dumps(_jsonable(cal.to_dict()))))
+        for k, v in cal.to_dict().items():
+            np.testing.assert_array_equal(getattr(back, k), v)
