@@ -19,6 +19,7 @@ from __future__ import annotations
 
 import argparse
 import json
+import os
 import resource
 import shutil
 import sys
@@ -145,6 +146,7 @@ def main() -> int:
         out = Path(tempfile.mkdtemp(prefix=f"bench_poses_{seed}_"))
         tracemalloc.start()
         t0 = time.perf_counter()
+        c0 = time.process_time()  # CPU of every thread of this process: load-independent
         rec = sc.poses(
             videos,
             out,
@@ -154,6 +156,7 @@ def main() -> int:
             progress=False,
         )
         wall = time.perf_counter() - t0
+        cpu = time.process_time() - c0
         _, py_peak = tracemalloc.get_traced_memory()
         tracemalloc.stop()
         e = pose_errors(rec, {n: truth.cameras(v) for v, n in enumerate(truth.names)})
@@ -163,6 +166,8 @@ def main() -> int:
             "seed": seed,
             "render_s": t_render,
             "wall_s": wall,
+            "cpu_s": cpu,
+            "load_avg_1min": os.getloadavg()[0],
             "registered_fraction": d["registered_fraction"],
             "frames": d["n_frames"],
             "posed": d["n_posed"],
@@ -206,6 +211,8 @@ def main() -> int:
         "scale_error_pct",
         "sync_max_error_ms",
         "wall_s",
+        "cpu_s",
+        "load_avg_1min",
         "rss_peak_mb",
         "py_peak_mb",
     ):

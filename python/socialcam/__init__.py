@@ -57,7 +57,7 @@ from socialcam.geometry import (
     ray_sphere,
     triangulate,
 )
-from socialcam.pipeline import poses
+from socialcam.pipeline import RunOptions, RunResult, poses, run
 from socialcam.sfm import VideoReconstruction, reconstruct_videos
 from socialcam.trajectory import (
     Trajectory,
@@ -85,6 +85,8 @@ __all__ = [
     "GazeField",
     "GazeFieldOptions",
     "GazeRays",
+    "RunOptions",
+    "RunResult",
     "Skeleton",
     "SkeletonReconstruction",
     "Trajectory",
@@ -116,6 +118,7 @@ __all__ = [
     "reconstruct_trajectory",
     "reconstruct_videos",
     "reconstructability",
+    "run",
     "saliency_field",
     "saliency_grid",
     "sfm",

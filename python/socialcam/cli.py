@@ -1,4 +1,4 @@
-"""Command line: ``socialcam demo``, ``socialcam render``, ``socialcam poses``."""
+"""Command line: ``socialcam demo``, ``render``, ``poses``, ``run`` and ``view``."""
 
 from __future__ import annotations
 
@@ -37,6 +37,14 @@ def main(argv: Sequence[str] | None = None) -> int:
     demo.add_argument("--seed", type=int, default=0, help="scene seed (default: %(default)s)")
     demo.add_argument("--no-plots", action="store_true", help="skip PNG plots")
     demo.add_argument("--json", action="store_true", help="print the whole report as JSON")
+    demo.add_argument(
+        "--stage",
+        action="append",
+        default=None,
+        metavar="NAME",
+        help="run only this stage (repeatable): triangulation, trajectory, articulated, "
+        "social_charges, gaze_field, run (socialcam run on the shipped rendered clips)",
+    )
     pz = sub.add_parser(
         "poses",
         help="camera poses of social-camera videos on one clock (poses.csv, sync.json, "
@@ -44,40 +52,50 @@ def main(argv: Sequence[str] | None = None) -> int:
     )
     pz.add_argument("videos", nargs="+", metavar="VIDEO", help="one video per wearer")
     pz.add_argument("--out", required=True, help="output folder")
-    pz.add_argument(
-        "--fps", type=float, default=10.0, help="output rate, Hz (default: %(default)s)"
+    _sfm_flags(pz)
+    pz.add_argument("--json", action="store_true", help="print the whole report as JSON")
+    rn = sub.add_parser(
+        "run",
+        help="the whole chain: poses, gaze calibration, gaze rays, social charges, tracks, "
+        "gaze field (gaze.csv, charges.csv, report.json, plots, overlay videos)",
     )
-    pz.add_argument(
-        "--keyframe-fps",
-        type=float,
-        default=1.0,
-        help="least keyframe rate, Hz; head turns add keyframes (default: %(default)s)",
-    )
-    pz.add_argument(
-        "--camera-model",
-        default="SIMPLE_RADIAL",
-        help="COLMAP lens model per wearer, e.g. SIMPLE_RADIAL, RADIAL, OPENCV_FISHEYE "
-        "(default: %(default)s)",
-    )
-    pz.add_argument(
-        "--offset",
+    rn.add_argument("videos", nargs="+", metavar="VIDEO", help="one video per wearer")
+    rn.add_argument("--out", required=True, help="output folder (the run folder)")
+    rn.add_argument("--config", default=None, help="TOML file of options (flags override it)")
+    rn.add_argument(
+        "--calibration",
         action="append",
         default=[],
-        metavar="PERSON=SECONDS",
-        help="manual clock offset of a video (repeatable); needed for videos without audio",
+        metavar="PERSON=T0:T1",
+        help="range-of-motion segment of a wearer, seconds on the common clock (repeatable); "
+        "without one the wearer's gaze is the optical axis",
     )
-    pz.add_argument(
-        "--eye-height", type=float, default=None, help="mean camera height above the floor, m"
+    _sfm_flags(rn)
+    rn.add_argument("--default-h", type=float, default=None, help="h without calibration")
+    rn.add_argument(
+        "--max-h", type=float, default=None, help="h above which a wearer did not fixate"
     )
-    pz.add_argument(
-        "--known-distance",
-        nargs=5,
-        default=None,
-        metavar=("PERSON_A", "TIME_A", "PERSON_B", "TIME_B", "METRES"),
-        help="distance between two camera centres (persons at common-clock times)",
+    rn.add_argument(
+        "--member-sigma", type=float, default=None, help="charge membership, bandwidths"
     )
-    pz.add_argument("--seed", type=int, default=0, help="random seed (default: %(default)s)")
-    pz.add_argument("--json", action="store_true", help="print the whole report as JSON")
+    rn.add_argument("--min-members", type=int, default=None, help="fewest members of a charge")
+    rn.add_argument("--no-overlays", action="store_true", help="skip the overlay videos")
+    rn.add_argument("--no-plots", action="store_true", help="skip PNG plots")
+    rn.add_argument("--force", action="store_true", help="replace another run's results in --out")
+    rn.add_argument(
+        "--rerun",
+        action="store_true",
+        help="also write DIR/run.rrd, a rerun recording (needs the 'rerun' extra)",
+    )
+    rn.add_argument("--json", action="store_true", help="print the whole report as JSON")
+    vw = sub.add_parser(
+        "view",
+        help="write a rerun recording (.rrd) of a run folder: map, cameras, video frames, "
+        "gaze rays, charges and tracks on the common timeline (needs the 'rerun' extra)",
+    )
+    vw.add_argument("run_dir", help="a folder written by socialcam run")
+    vw.add_argument("--out", default=None, help="the .rrd file (default: RUN_DIR/run.rrd)")
+    vw.add_argument("--no-frames", action="store_true", help="leave the video frames out")
     render = sub.add_parser(
         "render",
         help="render a test scene: first-person videos (mp4, H.264 + AAC) with exact ground truth",
@@ -109,6 +127,10 @@ def main(argv: Sequence[str] | None = None) -> int:
     args = parser.parse_args(argv)
     if args.command == "poses":
         return _poses(parser, args)
+    if args.command == "run":
+        return _run(parser, args)
+    if args.command == "view":
+        return _view(args.run_dir, args.out, frames=not args.no_frames)
     if args.command == "render":
         from socialcam.synth.render import render_scene
 
@@ -142,17 +164,60 @@ def main(argv: Sequence[str] | None = None) -> int:
 
         if args.seed < 0:
             parser.error("--seed: must be non-negative")
-        report = run_demo(
-            args.out, seed=args.seed, plots=not args.no_plots, progress=sys.stderr.isatty()
-        )
+        try:
+            report = run_demo(
+                args.out,
+                seed=args.seed,
+                plots=not args.no_plots,
+                progress=sys.stderr.isatty(),
+                stages=args.stage,
+            )
+        except ValueError as exc:
+            parser.error(str(exc))
         print(json.dumps(report, indent=2, default=float) if args.json else _summary(report))
         print(f"report written to {args.out}/report.json")
     return 0
 
 
-def _poses(parser: argparse.ArgumentParser, args: argparse.Namespace) -> int:
-    from socialcam.pipeline import poses
+def _sfm_flags(p: argparse.ArgumentParser) -> None:
+    """The flags ``socialcam poses`` and ``socialcam run`` share (``None``: not given)."""
+    p.add_argument("--fps", type=float, default=None, help="output rate, Hz (default: 10)")
+    p.add_argument(
+        "--keyframe-fps",
+        type=float,
+        default=None,
+        help="least keyframe rate, Hz; head turns add keyframes (default: 1)",
+    )
+    p.add_argument(
+        "--camera-model",
+        default=None,
+        help="COLMAP lens model per wearer, e.g. SIMPLE_RADIAL, RADIAL, OPENCV_FISHEYE "
+        "(default: SIMPLE_RADIAL)",
+    )
+    p.add_argument(
+        "--offset",
+        action="append",
+        default=[],
+        metavar="PERSON=SECONDS",
+        help="manual clock offset of a video (repeatable); needed for videos without audio",
+    )
+    p.add_argument(
+        "--eye-height", type=float, default=None, help="mean camera height above the floor, m"
+    )
+    p.add_argument(
+        "--known-distance",
+        nargs=5,
+        default=None,
+        metavar=("PERSON_A", "TIME_A", "PERSON_B", "TIME_B", "METRES"),
+        help="distance between two camera centres (persons at common-clock times)",
+    )
+    p.add_argument("--seed", type=int, default=None, help="random seed (default: 0)")
 
+
+def _sfm_inputs(
+    parser: argparse.ArgumentParser, args: argparse.Namespace
+) -> tuple[dict[str, float] | None, tuple[str, float, str, float, float] | None]:
+    """``--offset`` and ``--known-distance`` parsed (errors name the flag)."""
     offsets: dict[str, float] = {}
     for item in args.offset:
         person, sep, value = item.partition("=")
@@ -169,18 +234,28 @@ def _poses(parser: argparse.ArgumentParser, args: argparse.Namespace) -> int:
             known = (a, float(ta), b, float(tb), float(m))
         except ValueError:
             parser.error("--known-distance: times and metres must be numbers")
+    return offsets or None, known
+
+
+def _given(args: argparse.Namespace, **names: str) -> dict[str, object]:
+    """Option name → value of the flags given on the command line (``None``: not given)."""
+    return {opt: getattr(args, a) for opt, a in names.items() if getattr(args, a) is not None}
+
+
+def _poses(parser: argparse.ArgumentParser, args: argparse.Namespace) -> int:
+    from socialcam.pipeline import poses
+
+    offsets, known = _sfm_inputs(parser, args)
     try:
         rec = poses(
             args.videos,
             args.out,
-            fps=args.fps,
-            sync=offsets or None,
+            fps=10.0 if args.fps is None else args.fps,
+            sync=offsets,
             known_distance=known,
             eye_height=args.eye_height,
-            keyframe_fps=args.keyframe_fps,
-            camera_model=args.camera_model,
-            seed=args.seed,
             progress=sys.stderr.isatty(),
+            **_given(args, keyframe_fps="keyframe_fps", camera_model="camera_model", seed="seed"),  # type: ignore[arg-type]
         )
     except ValueError as exc:
         print(f"socialcam poses: error: {exc}", file=sys.stderr)
@@ -198,6 +273,119 @@ def _poses(parser: argparse.ArgumentParser, args: argparse.Namespace) -> int:
         for w in d["warnings"]:
             print(f"warning: {w}", file=sys.stderr)
     print(f"poses written to {args.out}/poses.csv")
+    return 0
+
+
+def _segment(parser: argparse.ArgumentParser, item: str) -> tuple[str, tuple[float, float]]:
+    person, sep, span = item.partition("=")
+    a, sep2, b = span.partition(":")
+    try:
+        if not (sep and sep2 and person):
+            raise ValueError
+        return person, (float(a), float(b))
+    except ValueError:
+        parser.error(f"--calibration: expected PERSON=T0:T1 (seconds), got {item!r}")
+
+
+def _run(parser: argparse.ArgumentParser, args: argparse.Namespace) -> int:
+    import warnings
+
+    from socialcam.pipeline import RunWarning, load_run_config, run
+
+    options: dict[str, object] = {}
+    inputs: dict[str, object] = {}
+    if args.config is not None:
+        try:
+            options, inputs = load_run_config(args.config)
+        except ValueError as exc:
+            parser.error(str(exc))
+    offsets, known = _sfm_inputs(parser, args)
+    calibration = dict(inputs.get("calibration") or {})  # type: ignore[call-overload]
+    calibration.update(dict(_segment(parser, item) for item in args.calibration))
+    sync = dict(inputs.get("offsets") or {})  # type: ignore[call-overload]
+    sync.update(offsets or {})
+    options.update(
+        _given(
+            args,
+            fps="fps",
+            keyframe_fps="keyframe_fps",
+            camera_model="camera_model",
+            seed="seed",
+            default_h="default_h",
+            max_h="max_h",
+            member_sigma="member_sigma",
+            min_members="min_members",
+        )
+    )
+    if args.no_overlays:
+        options["overlays"] = False
+    if args.no_plots:
+        options["plots"] = False
+    intrinsics = None
+    if inputs.get("intrinsics") is not None:
+        try:
+            intrinsics = {
+                str(person): ([list(map(float, row)) for row in d["K"]], list(d.get("dist", [])))
+                for person, d in inputs["intrinsics"].items()  # type: ignore[attr-defined]
+            }
+        except (KeyError, TypeError, ValueError, AttributeError):
+            parser.error("config: intrinsics: expected [intrinsics.PERSON] with K (3x3) and dist")
+    kd = known if known is not None else inputs.get("known_distance")
+    eh = args.eye_height if args.eye_height is not None else inputs.get("eye_height")
+    try:
+        with warnings.catch_warnings():
+            warnings.simplefilter("ignore", RunWarning)  # printed from the report below
+            res = run(
+                args.videos,
+                args.out,
+                calibration=calibration or None,
+                sync=sync or None,
+                intrinsics=intrinsics,
+                known_distance=tuple(kd) if kd is not None else None,  # type: ignore[arg-type]
+                eye_height=eh,  # type: ignore[arg-type]
+                overwrite=args.force,
+                progress=sys.stderr.isatty(),
+                **options,  # type: ignore[arg-type]
+            )
+    except ValueError as exc:
+        print(f"socialcam run: error: {exc}", file=sys.stderr)
+        return 2
+    rep = res.report
+    if args.json:
+        print(json.dumps(rep, indent=2))
+    else:
+        print(
+            f"posed {rep['poses']['n_posed']} of {rep['poses']['n_frames']} frames; "
+            f"{rep['charges']['total']} charges in {rep['charges']['frames_with_charges']} of "
+            f"{rep['output_frames']} output frames, {rep['charges']['tracks']} tracks"
+        )
+        for n, c in rep["calibration"].items():
+            if c["status"] == "calibrated":
+                print(
+                    f"{n}: calibrated, v {c['angle_to_optical_axis_deg']:.1f}° from the optical "
+                    f"axis (± {c['v_std_deg']:.2f}°), h = {c['h']:.3f}"
+                )
+        print(
+            ", ".join(
+                f"{k} {v['seconds']:.1f} s{' (cached)' if v['cached'] else ''}"
+                for k, v in rep["stages"].items()
+            )
+        )
+        for w in rep["warnings"]:
+            print(f"warning: {w}", file=sys.stderr)
+    print(f"results written to {args.out}")
+    return _view(args.out, None, frames=True) if args.rerun else 0
+
+
+def _view(run_dir: str, out: str | None, *, frames: bool) -> int:
+    from socialcam.view import write_rrd
+
+    try:
+        path = write_rrd(run_dir, out, frames=frames)
+    except ValueError as exc:
+        print(f"socialcam view: error: {exc}", file=sys.stderr)
+        return 2
+    print(f"rerun recording written to {path} (open it with: rerun {path})")
     return 0
 
 

@@ -103,6 +103,20 @@ class GazeCalibration:
         h = np.full(len(cameras), self.h)
         return readonly(p), readonly(v), readonly(h)
 
+    @classmethod
+    def from_dict(cls, d: dict[str, Any]) -> GazeCalibration:
+        """The inverse of :meth:`to_dict` (``None`` entries of arrays read as NaN)."""
+        kw: dict[str, Any] = {}
+        for k in cls.__dataclass_fields__:
+            val = d[k]
+            if isinstance(val, list):
+                kw[k] = readonly(np.array([np.nan if x is None else x for x in val], float))
+            elif k in ("h", "v_std", "h_rel_std"):
+                kw[k] = float("nan") if val is None else float(val)
+            else:
+                kw[k] = val
+        return cls(**kw)
+
     def to_dict(self) -> dict[str, Any]:
         out: dict[str, Any] = {}
         for k in self.__dataclass_fields__:

@@ -13,14 +13,37 @@ import json
 import os
 import time
 import warnings
-from collections.abc import Sequence
-from dataclasses import asdict
+from collections.abc import Mapping, Sequence
+from dataclasses import asdict, dataclass, fields, replace
 from pathlib import Path
 from typing import Any
 
 import numpy as np
+import numpy.typing as npt
 
-from socialcam.io import atomic_write_bytes, write_json
+from socialcam._validate import (
+    FloatArray,
+    apply_overrides,
+    as_float_array,
+    check_choice,
+    check_float,
+    check_int,
+    check_seed,
+    readonly,
+)
+from socialcam.camera import Cameras
+from socialcam.charges import (
+    MEMBERSHIP_RULES,
+    Charge,
+    ChargeTrack,
+    GazeRays,
+    find_charges_sequence,
+    track_charges,
+)
+from socialcam.errors import DegenerateError
+from socialcam.gaze import DEFAULT_H, GazeCalibration, calibrate_gaze
+from socialcam.gazefield import GazeField
+from socialcam.io import _jsonable, atomic_write_bytes, write_json
 from socialcam.sfm import (
     KnownDistance,
     VideoPosesWarning,
@@ -42,6 +65,28 @@ def _input_key(videos: Sequence[str | os.PathLike[str]], settings: dict[str, Any
         h.update(f"{os.path.abspath(p)}|{st.st_size}|{st.st_mtime_ns}\n".encode())
     h.update(json.dumps(settings, sort_keys=True, default=repr).encode())
     return h.hexdigest()[:16]
+
+
+def _poses_key(
+    videos: Sequence[str | os.PathLike[str]],
+    opts: VideoSfmOptions,
+    sync: Any,
+    intrinsics: Any,
+    known_distance: Any,
+    eye_height: float | None,
+) -> str:
+    """The cache key of the poses stage (checks that every video exists)."""
+    settings = {
+        "options": asdict(opts),
+        "sync": sync if not hasattr(sync, "to_dict") else sync.to_dict(),
+        "intrinsics": intrinsics,
+        "known_distance": known_distance,
+        "eye_height": eye_height,
+    }
+    for p in videos:
+        if not os.path.exists(p):
+            raise ValueError(f"videos: {p} does not exist")
+    return _input_key(videos, settings)
 
 
 def poses_csv(rec: VideoReconstruction) -> str:
@@ -88,17 +133,7 @@ def poses(
     opts = _options(options, {**overrides, "fps": fps})
     out = Path(out_dir)
     out.mkdir(parents=True, exist_ok=True)
-    settings = {
-        "options": asdict(opts),
-        "sync": sync if not hasattr(sync, "to_dict") else sync.to_dict(),
-        "intrinsics": intrinsics,
-        "known_distance": known_distance,
-        "eye_height": eye_height,
-    }
-    for p in videos:
-        if not os.path.exists(p):
-            raise ValueError(f"videos: {p} does not exist")
-    key = _input_key(videos, settings)
+    key = _poses_key(videos, opts, sync, intrinsics, known_distance, eye_height)
     cache = out / "cache" / "sfm"
     key_file = cache / "key.txt"
     t0 = time.perf_counter()
@@ -162,3 +197,1016 @@ def _at(seq: Any, i: int) -> Any:
         return seq[i]
     except (TypeError, IndexError, KeyError):
         return None
+
+
+# ============================================================================ socialcam run
+#: Stages of :func:`run`, in order (each has ``DIR/cache/<stage>`` except ``poses``, whose
+#: cache is ``DIR/cache/sfm``).
+RUN_STAGES = ("poses", "calibration", "gaze", "charges", "tracks", "field", "outputs")
+
+GAZE_HEADER = "person,time,px,py,pz,vx,vy,vz,h"
+CHARGES_HEADER = "time,track,x,y,z,magnitude,members"
+
+
+class RunWarning(UserWarning):
+    """Something a user of :func:`run` should know (also listed in ``report.json``)."""
+
+
+@dataclass(frozen=True)
+class RunOptions:
+    """Options of :func:`run` and ``socialcam run`` (validated on construction).
+
+    Attributes
+    ----------
+    fps : output rate of poses, gaze and charges, Hz
+    keyframe_fps, camera_model, seed : as :class:`socialcam.sfm.VideoSfmOptions` (``seed``
+        also seeds the charge finder)
+    default_h : eye-in-head spread assumed for a wearer without a usable calibration
+    max_h : a calibration whose residual spread ``h`` exceeds this (radians) means the
+        wearer did not fixate: warn and fall back to the optical axis
+    max_axis_angle : degrees; a calibrated primary direction further than this from the
+        optical axis is implausible for a head-mounted camera: fall back
+    max_eye_offset : metres; the same for the eye centre's distance from the camera
+    max_depth : metres; the fixated point must lie within this distance of the eye
+    max_v_std : degrees; a calibrated direction with a larger standard error is not
+        determined by the segment: fall back
+    max_p_std : metres; the same for the norm of the eye centre's standard errors
+    max_pose_gap : a wearer's pose at an output time is interpolated between two posed
+        frames at most this many frames apart, else the wearer is absent at that time
+    member_sigma, min_members, membership : social charges (:class:`socialcam.ChargeOptions`)
+    track_bandwidth, track_min_length : :func:`socialcam.track_charges`
+    overlays : write one overlay video per wearer
+    plots : write PNG plots
+    """
+
+    fps: float = 10.0
+    keyframe_fps: float = 2.0
+    camera_model: str = "SIMPLE_RADIAL"
+    seed: int = 0
+    default_h: float = DEFAULT_H
+    max_h: float = 0.15
+    max_axis_angle: float = 30.0
+    max_eye_offset: float = 0.25
+    max_depth: float = 10.0
+    max_v_std: float = 2.0
+    max_p_std: float = 0.05
+    max_pose_gap: float = 2.0
+    member_sigma: float = 2.5
+    min_members: int = 2
+    membership: str = "strongest"
+    track_bandwidth: float = 0.3
+    track_min_length: int = 10
+    overlays: bool = True
+    plots: bool = True
+
+    def __post_init__(self) -> None:
+        check_float(self.fps, "fps", min=0.0, min_exclusive=True, max=240.0)
+        check_float(self.keyframe_fps, "keyframe_fps", min=0.0, min_exclusive=True)
+        if not isinstance(self.camera_model, str):
+            raise ValueError(
+                f"camera_model: expected a COLMAP model name, got {self.camera_model!r}"
+            )
+        check_seed(self.seed)
+        check_float(self.default_h, "default_h", min=0.0, min_exclusive=True)
+        check_float(self.max_h, "max_h", min=0.0, min_exclusive=True)
+        check_float(self.max_axis_angle, "max_axis_angle", min=0.0, max=180.0)
+        check_float(self.max_eye_offset, "max_eye_offset", min=0.0)
+        check_float(self.max_depth, "max_depth", min=0.0, min_exclusive=True)
+        check_float(self.max_v_std, "max_v_std", min=0.0, min_exclusive=True)
+        check_float(self.max_p_std, "max_p_std", min=0.0, min_exclusive=True)
+        check_float(self.max_pose_gap, "max_pose_gap", min=1.0)
+        check_float(self.member_sigma, "member_sigma", min=0.0, min_exclusive=True)
+        check_int(self.min_members, "min_members", min=1)
+        check_choice(self.membership, "membership", MEMBERSHIP_RULES)
+        check_float(self.track_bandwidth, "track_bandwidth", min=0.0, min_exclusive=True)
+        check_int(self.track_min_length, "track_min_length", min=1)
+        for name in ("overlays", "plots"):
+            if not isinstance(getattr(self, name), (bool, np.bool_)):
+                raise ValueError(f"{name}: expected True or False, got {getattr(self, name)!r}")
+
+
+#: Keys of a ``socialcam run`` TOML config that are inputs of :func:`run`, not options.
+_RUN_EXTRA_KEYS = ("calibration", "offsets", "intrinsics", "known_distance", "eye_height")
+
+
+def load_run_config(path: str | os.PathLike[str]) -> tuple[dict[str, Any], dict[str, Any]]:
+    """Reads a ``socialcam run`` TOML config: returns ``(options, inputs)`` where options are
+    :class:`RunOptions` fields and inputs the keys ``calibration`` (table person →
+    ``[t0, t1]``), ``offsets`` (person → seconds), ``known_distance`` (``[a, ta, b, tb,
+    metres]``), ``eye_height``, ``intrinsics`` (table person → ``{K = [[...], ...], dist =
+    [...]}``, as :func:`socialcam.sfm.reconstruct_videos`). Keys may sit at the top level or in a ``[run]`` table."""
+    try:
+        import tomllib  # type: ignore[import-not-found,unused-ignore]
+    except ImportError:  # Python 3.10
+        raise ValueError("config: TOML configs need Python ≥ 3.11 (tomllib)") from None
+    try:
+        with open(path, "rb") as fh:
+            data = tomllib.load(fh)
+    except (OSError, tomllib.TOMLDecodeError) as exc:
+        raise ValueError(f"config: cannot read {path}: {exc}") from None
+    table = dict(data.get("run", data))
+    inputs = {k: table.pop(k) for k in _RUN_EXTRA_KEYS if k in table}
+    names = {f.name for f in fields(RunOptions)}
+    unknown = sorted(set(table) - names)
+    if unknown:
+        raise ValueError(
+            f"config: {unknown[0]} is not a socialcam run option "
+            f"(options: {', '.join(sorted(names | set(_RUN_EXTRA_KEYS)))})"
+        )
+    return table, inputs
+
+
+@dataclass(frozen=True)
+class RunResult:
+    """What :func:`run` produced (everything is also in the run folder).
+
+    Attributes
+    ----------
+    out_dir : the run folder
+    reconstruction : the camera poses (:class:`socialcam.sfm.VideoReconstruction`)
+    calibrations : person → :class:`socialcam.GazeCalibration` (``calibrated=False``: the
+        optical-axis fallback)
+    times : (T,) output times on the common clock, s
+    gaze : person → ``(p (T, 3), v (T, 3), h (T,))`` primary gaze rays, NaN where the
+        wearer has no pose
+    charges : per output time, the :class:`socialcam.Charge` list
+    tracks : the :class:`socialcam.ChargeTrack` list (frames index ``times``)
+    field : the fitted :class:`socialcam.GazeField` (``None`` without charges)
+    report : the ``report.json`` content
+    """
+
+    out_dir: Path
+    reconstruction: VideoReconstruction
+    calibrations: dict[str, GazeCalibration]
+    times: FloatArray
+    gaze: dict[str, tuple[FloatArray, FloatArray, FloatArray]]
+    charges: list[list[Charge]]
+    tracks: list[ChargeTrack]
+    field: GazeField | None
+    report: dict[str, Any]
+
+    def frames(self) -> list[GazeRays | None]:
+        """Per output time the :class:`socialcam.GazeRays` of the posed wearers (ids index
+        ``reconstruction.names``), ``None`` where nobody is posed."""
+        return _frames(self.reconstruction.names, self.gaze)
+
+
+def _hash(*parts: Any) -> str:
+    return hashlib.sha256(
+        json.dumps(parts, sort_keys=True, default=_jsonable).encode()
+    ).hexdigest()[:16]
+
+
+class _Cache:
+    """``DIR/cache/<stage>``: ``key.txt`` written after the stage's data, so a stage that
+    crashed or was interrupted has no key and reruns."""
+
+    def __init__(self, out: Path, stage: str, key: str) -> None:
+        self.dir = out / "cache" / stage
+        self.key = key
+
+    def valid(self, *files: str) -> bool:
+        kf = self.dir / "key.txt"
+        return (
+            kf.is_file()
+            and kf.read_text().strip() == self.key
+            and all((self.dir / f).is_file() for f in files)
+        )
+
+    def invalidate(self) -> None:
+        (self.dir / "key.txt").unlink(missing_ok=True)
+
+    def commit(self) -> None:
+        atomic_write_bytes(self.dir / "key.txt", (self.key + "\n").encode())
+
+    def write_json(self, name: str, obj: Any) -> None:
+        self.dir.mkdir(parents=True, exist_ok=True)
+        write_json(self.dir / name, obj)
+
+    def read_json(self, name: str) -> Any:
+        return json.loads((self.dir / name).read_text())
+
+    def write_npz(self, name: str, **arrays: Any) -> None:
+        buf = io.BytesIO()
+        np.savez(buf, **arrays)
+        atomic_write_bytes(self.dir / name, buf.getvalue())
+
+    def read_npz(self, name: str) -> dict[str, np.ndarray]:
+        with np.load(self.dir / name, allow_pickle=False) as z:
+            return {k: z[k] for k in z.files}
+
+
+def _check_owner(out: Path, videos: Sequence[str | os.PathLike[str]], force: bool) -> None:
+    """Refuses a run folder that holds the results of other videos (unless ``force``)."""
+    mine = [os.path.abspath(p) for p in videos]
+    manifest = out / "run.json"
+    other: list[str] | None = None
+    if manifest.is_file():
+        try:
+            other = list(json.loads(manifest.read_text())["videos"])
+        except (ValueError, KeyError, TypeError):
+            other = ["<unreadable run.json>"]
+    elif (out / "cache" / "sfm" / "reconstruction.json").is_file():
+        try:
+            names = json.loads((out / "cache" / "sfm" / "reconstruction.json").read_text())["names"]
+        except (ValueError, KeyError, TypeError):
+            names = ["<unreadable>"]
+        if list(names) != [Path(p).stem for p in videos]:
+            other = [str(n) for n in names]
+    if other is not None and other != mine:
+        if not force:
+            raise ValueError(
+                f"out_dir: {out} holds the results of another run ({', '.join(other)}); "
+                "choose another output folder, or pass overwrite=True (--force) to replace it"
+            )
+        import shutil
+
+        for sub in ("cache",):
+            shutil.rmtree(out / sub, ignore_errors=True)
+    write_json(manifest, {"videos": mine, "names": [Path(p).stem for p in videos]})
+
+
+def _parse_segments(
+    calibration: Mapping[str, Any] | None, names: Sequence[str]
+) -> dict[str, tuple[float, float]]:
+    if calibration is None:
+        return {}
+    if not isinstance(calibration, Mapping):
+        raise ValueError(
+            "calibration: expected a mapping person → (t0, t1) on the common clock, got "
+            f"{type(calibration).__name__}"
+        )
+    out: dict[str, tuple[float, float]] = {}
+    for person, seg in calibration.items():
+        if person not in names:
+            raise ValueError(
+                f"calibration: {person!r} is not one of the persons ({', '.join(names)})"
+            )
+        try:
+            t0, t1 = (float(x) for x in seg)
+        except (TypeError, ValueError):
+            raise ValueError(
+                f"calibration: {person}: expected (t0, t1) in seconds, got {seg!r}"
+            ) from None
+        if not (np.isfinite(t0) and np.isfinite(t1) and t1 > t0):
+            raise ValueError(f"calibration: {person}: need finite t0 < t1, got ({t0}, {t1})")
+        out[person] = (t0, t1)
+    return out
+
+
+def _calibrate_one(
+    cams: Cameras | None,
+    segment: tuple[float, float] | None,
+    opts: RunOptions,
+    unit: float = 1.0,
+) -> tuple[GazeCalibration, dict[str, Any], str | None]:
+    """Eq 3.1 on the wearer's poses inside ``segment``, checked for plausibility.
+    ``unit``: metres per map unit (NaN: unknown; the metric checks are then made relative
+    to the fixation distance, taken as 1.5 m). Returns the calibration (or the optical-axis
+    fallback), a JSON summary, and the reason for falling back (``None`` when calibrated)."""
+    fallback = GazeCalibration.optical_axis(opts.default_h)
+    summary: dict[str, Any] = {"segment": list(segment) if segment else None}
+    if segment is None:
+        return fallback, summary, "no calibration segment"
+    if cams is None or len(cams) == 0:
+        return fallback, summary, "the wearer was never posed"
+    assert cams.times is not None
+    sel = np.flatnonzero((cams.times >= segment[0]) & (cams.times <= segment[1]))
+    summary["n_frames"] = len(sel)
+    if len(sel) < 5:
+        return fallback, summary, f"only {len(sel)} posed frames in the calibration segment"
+    seg = cams[sel]
+    try:
+        cal = calibrate_gaze(seg)
+    except (ValueError, DegenerateError) as exc:
+        return fallback, summary, f"the calibration failed ({exc})"
+    eyes = np.einsum("fji,j->fi", seg.R, cal.p) + seg.C
+    depth = np.linalg.norm(cal.y - eyes, axis=1)
+    if not np.isfinite(unit):  # map units: scale so that the median fixation is 1.5 m
+        unit = 1.5 / float(np.median(depth)) if np.median(depth) > 0 else 1.0
+    depth = depth * unit
+    axis_deg = float(np.degrees(np.arccos(np.clip(cal.v[2], -1.0, 1.0))))
+    summary.update(
+        p=cal.p.tolist(),
+        p_std=cal.p_std.tolist(),
+        v=cal.v.tolist(),
+        v_std_deg=float(np.degrees(cal.v_std)),
+        h=cal.h,
+        h_rel_std=cal.h_rel_std,
+        y=cal.y.tolist(),
+        y_std=cal.y_std.tolist(),
+        residual_rms_deg=float(np.degrees(np.sqrt(np.mean(cal.residuals**2)))),
+        angle_to_optical_axis_deg=axis_deg,
+        fixation_depth_m=[float(depth.min()), float(depth.max())],
+        iterations=cal.iterations,
+        converged=cal.converged,
+    )
+    if not np.isfinite(cal.h) or cal.h > opts.max_h:
+        why = (
+            f"the wearer did not fixate one point (residual spread h = {cal.h:.3f} > "
+            f"max_h = {opts.max_h})"
+        )
+    elif axis_deg > opts.max_axis_angle:
+        why = (
+            f"implausible gaze direction ({axis_deg:.1f}° from the optical axis > "
+            f"max_axis_angle = {opts.max_axis_angle}°)"
+        )
+    elif unit * float(np.linalg.norm(cal.p)) > opts.max_eye_offset:
+        why = (
+            f"implausible eye centre ({unit * np.linalg.norm(cal.p):.2f} m from the camera > "
+            f"max_eye_offset = {opts.max_eye_offset} m)"
+        )
+    elif unit * float(np.linalg.norm(cal.p_std)) > opts.max_p_std:
+        why = (
+            f"the segment does not determine the eye centre (standard error "
+            f"{100 * unit * np.linalg.norm(cal.p_std):.1f} cm > max_p_std = "
+            f"{100 * opts.max_p_std:g} cm: move back and forth, not only sideways)"
+        )
+    elif np.degrees(cal.v_std) > opts.max_v_std:
+        why = (
+            f"the segment does not determine the gaze direction (standard error "
+            f"{np.degrees(cal.v_std):.1f}° > max_v_std = {opts.max_v_std}°: move the head "
+            "more, side to side and back and forth, while fixating)"
+        )
+    elif depth.max() > opts.max_depth:
+        why = f"the fixated point is {depth.max():.1f} m away (> max_depth = {opts.max_depth} m)"
+    elif not cal.converged:
+        why = "Levenberg–Marquardt did not converge"
+    else:
+        return cal, summary, None
+    return fallback, summary, why
+
+
+def _pose_at(cams: Cameras, t: FloatArray, max_gap: float) -> tuple[FloatArray, FloatArray]:
+    """World→camera rotations ``(T, 3, 3)`` and centres ``(T, 3)`` at times ``t``,
+    interpolated (slerp, linear) between the two posed frames around each time when they
+    are at most ``max_gap`` seconds apart (exact hits need one frame); NaN elsewhere."""
+    from scipy.spatial.transform import Rotation, Slerp  # type: ignore[import-untyped,unused-ignore]
+
+    assert cams.times is not None
+    ts = cams.times
+    R_out = np.full((len(t), 3, 3), np.nan)
+    C_out = np.full((len(t), 3), np.nan)
+    if len(ts) == 0:
+        return R_out, C_out
+    j = np.searchsorted(ts, t, side="right") - 1  # frame at or before
+    tol = 1e-6
+    for k, tk in enumerate(t):
+        a = int(j[k])
+        if a >= 0 and abs(ts[a] - tk) <= tol:
+            R_out[k], C_out[k] = cams.R[a], cams.C[a]
+            continue
+        if a < 0 or a + 1 >= len(ts) or ts[a + 1] - ts[a] > max_gap:
+            if a + 1 < len(ts) and abs(ts[a + 1] - tk) <= tol:
+                R_out[k], C_out[k] = cams.R[a + 1], cams.C[a + 1]
+            continue
+        w = (tk - ts[a]) / (ts[a + 1] - ts[a])
+        s = Slerp([0.0, 1.0], Rotation.from_matrix(cams.R[a : a + 2]))
+        R_out[k] = s([w]).as_matrix()[0]
+        C_out[k] = (1 - w) * cams.C[a] + w * cams.C[a + 1]
+    return R_out, C_out
+
+
+def _frames(
+    names: Sequence[str], gaze: Mapping[str, tuple[FloatArray, FloatArray, FloatArray]]
+) -> list[GazeRays | None]:
+    T = next((len(g[2]) for g in gaze.values()), 0)
+    out: list[GazeRays | None] = []
+    for k in range(T):
+        ids = [i for i, n in enumerate(names) if n in gaze and np.isfinite(gaze[n][0][k]).all()]
+        if not ids:
+            out.append(None)
+            continue
+        out.append(
+            GazeRays(
+                np.array([gaze[names[i]][0][k] for i in ids]),
+                np.array([gaze[names[i]][1][k] for i in ids]),
+                np.array([gaze[names[i]][2][k] for i in ids]),
+                ids=np.array(ids, dtype=np.int64),
+                normalize=True,
+            )
+        )
+    return out
+
+
+def _charge_from_dict(d: Mapping[str, Any]) -> Charge:
+    ints = ("members", "member_index", "ids")
+    kw: dict[str, Any] = {}
+    for f in fields(Charge):
+        val = d[f.name]
+        if f.name in ("magnitude",):
+            kw[f.name] = float(val)
+        elif f.name in ("support", "frame"):
+            kw[f.name] = int(val)
+        else:
+            kw[f.name] = readonly(np.asarray(val, dtype=np.int64 if f.name in ints else np.float64))
+    kw["region_axes"] = readonly(np.asarray(d["region_axes"], dtype=np.float64).reshape(3, 3))
+    return Charge(**kw)
+
+
+def _track_from_dict(d: Mapping[str, Any]) -> ChargeTrack:
+    return ChargeTrack(
+        id=int(d["id"]),
+        frames=readonly(np.asarray(d["frames"], dtype=np.int64)),
+        positions=readonly(np.asarray(d["positions"], dtype=np.float64).reshape(-1, 3)),
+        magnitudes=readonly(np.asarray(d["magnitudes"], dtype=np.float64)),
+        members=tuple(readonly(np.asarray(m, dtype=np.int64)) for m in d["members"]),
+        people=readonly(np.asarray(d["people"], dtype=np.int64)),
+        feature=readonly(np.asarray(d["feature"], dtype=np.float64)),
+        core_members=readonly(np.asarray(d["core_members"], dtype=np.int64)),
+    )
+
+
+def gaze_csv(
+    names: Sequence[str],
+    times: FloatArray,
+    gaze: Mapping[str, tuple[FloatArray, FloatArray, FloatArray]],
+) -> str:
+    """``gaze.csv`` text: ``person,time,px,py,pz,vx,vy,vz,h`` for every posed output time."""
+    buf = io.StringIO()
+    buf.write(GAZE_HEADER + "\n")
+    for n in names:
+        if n not in gaze:
+            continue
+        p, v, h = gaze[n]
+        for k in np.flatnonzero(np.isfinite(p).all(axis=1)):
+            buf.write(
+                f"{n},{times[k]:.6f},{p[k, 0]:.6f},{p[k, 1]:.6f},{p[k, 2]:.6f},"
+                f"{v[k, 0]:.8f},{v[k, 1]:.8f},{v[k, 2]:.8f},{h[k]:.6f}\n"
+            )
+    return buf.getvalue()
+
+
+def charges_csv(
+    names: Sequence[str],
+    times: FloatArray,
+    charges: Sequence[Sequence[Charge]],
+    tracks: Sequence[ChargeTrack],
+) -> str:
+    """``charges.csv`` text: ``time,track,x,y,z,magnitude,members`` — one row per charge
+    (``track`` −1 when it joined no track; members ``;``-joined person names)."""
+    track_of = _track_index(tracks)
+    buf = io.StringIO()
+    buf.write(CHARGES_HEADER + "\n")
+    for f, cs in enumerate(charges):
+        for c in cs:
+            tid = track_of.get((f, hash(c.position.tobytes())), -1)
+            members = ";".join(names[int(i)] for i in c.members)
+            x, y, z = c.position
+            buf.write(f"{times[f]:.6f},{tid},{x:.6f},{y:.6f},{z:.6f},{c.magnitude:.6g},{members}\n")
+    return buf.getvalue()
+
+
+def frames_at(vid: Any, local_times: FloatArray) -> Any:
+    """Streams ``(j, image)``: for each increasing local time ``local_times[j]`` the
+    nearest frame of the open :class:`socialcam.video.Video` ``vid``, decoding it once
+    (a frame may repeat; times beyond the video are skipped)."""
+    ts = vid.timestamps()
+    ok = np.flatnonzero((local_times >= ts[0] - 1e-3) & (local_times <= ts[-1] + 1e-3))
+    if len(ok) == 0:
+        return
+    want = np.abs(ts[None, :] - local_times[ok][:, None]).argmin(axis=1)
+    it = vid.frames(start=float(ts[want[0]]), end=float(ts[want[-1]]) + 1e-6)
+    last = None
+    for j, i in zip(ok, want, strict=True):
+        while last is None or last.index < i:
+            nxt = next(it, None)
+            if nxt is None:
+                break
+            last = nxt
+        if last is not None and last.index >= i:
+            yield int(j), last.image
+
+
+def _overlay_video(
+    video: str | os.PathLike[str],
+    path: Path,
+    name: str,
+    offset: float,
+    times: FloatArray,
+    R: FloatArray,
+    C: FloatArray,
+    K: FloatArray,
+    charges: Sequence[Sequence[Charge]],
+    names: Sequence[str],
+    track_of: Mapping[tuple[int, int], int],
+    fps: float,
+) -> int:
+    """Writes ``path``: the wearer's video at the output times with the charges projected
+    into its view (circles sized by the confidence region, track ids, member names).
+    Returns the number of frames written."""
+    import cv2
+
+    from socialcam.synth.render import _write_video
+    from socialcam.video import open_video
+
+    colours = [(230, 25, 75), (60, 180, 75), (255, 225, 25), (0, 130, 200), (245, 130, 48),
+               (145, 30, 180), (70, 240, 240), (240, 50, 230)]  # fmt: skip
+    with open_video(Path(video)) as vid:
+        ts_local = vid.timestamps()
+        width, height = vid.info.width, vid.info.height
+        lo, hi = float(ts_local[0] + offset), float(ts_local[-1] + offset)
+        keep = np.flatnonzero((times >= lo - 1e-6) & (times <= hi + 1e-6))
+        if len(keep) == 0:
+            return 0
+
+        def frames() -> Any:
+            for j, raw in frames_at(vid, times[keep] - offset):
+                k = int(keep[j])
+                img = raw.copy()
+                if np.isfinite(R[k]).all():
+                    for c in charges[k]:
+                        Xc = R[k] @ (c.position - C[k])
+                        if Xc[2] <= 0.05:
+                            continue
+                        u = K @ (Xc / Xc[2])
+                        r = (
+                            float(np.max(c.region_radii))
+                            if np.isfinite(c.region_radii).all()
+                            else 0.1
+                        )
+                        rad = int(np.clip(K[0, 0] * r / Xc[2], 4, 200))
+                        tid = track_of.get((int(k), hash(c.position.tobytes())), -1)
+                        col = colours[tid % len(colours)] if tid >= 0 else (200, 200, 200)
+                        centre = (round(u[0]), round(u[1]))
+                        cv2.circle(img, centre, rad, col, 2, cv2.LINE_AA)
+                        cv2.drawMarker(img, centre, col, cv2.MARKER_CROSS, 10, 2)
+                        label = f"#{tid} " + ",".join(names[int(i)] for i in c.members)
+                        cv2.putText(img, label, (centre[0] + rad + 3, centre[1]),
+                                    cv2.FONT_HERSHEY_SIMPLEX, 0.45, col, 1, cv2.LINE_AA)  # fmt: skip
+                else:
+                    cv2.putText(img, "no pose", (10, 20), cv2.FONT_HERSHEY_SIMPLEX, 0.6,
+                                (255, 0, 0), 2, cv2.LINE_AA)  # fmt: skip
+                cv2.putText(img, f"{name} t={times[k]:.2f}s", (10, height - 10),
+                            cv2.FONT_HERSHEY_SIMPLEX, 0.5, (255, 255, 255), 1, cv2.LINE_AA)  # fmt: skip
+                yield img
+
+        _write_video(path, frames, len(keep), fps, width, height, None, 20)
+    return len(keep)
+
+
+def run(
+    videos: Sequence[str | os.PathLike[str]],
+    out_dir: str | os.PathLike[str],
+    *,
+    calibration: Mapping[str, tuple[float, float]] | None = None,
+    sync: Any = None,
+    intrinsics: Any = None,
+    known_distance: KnownDistance | tuple[str, float, str, float, float] | None = None,
+    eye_height: float | None = None,
+    options: RunOptions | None = None,
+    overwrite: bool = False,
+    progress: bool = True,
+    **overrides: Any,
+) -> RunResult:
+    """The whole chain on social-camera videos: poses → gaze calibration (Eq 3.1) → primary
+    gaze rays → social charges (Sec 6.1) → charge tracks → gaze field (Chapter 7).
+
+    Writes into ``out_dir`` (every file atomically) what :func:`poses` writes, plus
+    ``gaze.csv`` (``person,time,px,py,pz,vx,vy,vz,h``), ``charges.csv``
+    (``time,track,x,y,z,magnitude,members``), ``report.json`` (stage times, calibration
+    figures with their standard errors, warnings), ``charges_top.png``,
+    ``charges_time.png`` and ``overlay_<person>.mp4``. Stage results are cached in
+    ``out_dir/cache/<stage>`` under a hash of their inputs and options: a rerun (after a
+    crash or Ctrl-C too) resumes at the first stage whose key changed.
+
+    Parameters
+    ----------
+    videos : one video per wearer; the file stem names the person.
+    out_dir : the run folder. A folder that holds another run's results (other videos) is
+        refused unless ``overwrite=True``.
+    calibration : person → ``(t0, t1)`` seconds on the common clock (see ``sync.json``):
+        the wearer's range-of-motion segment (fixating one still point while moving).
+        Wearers without one — or whose segment fails (did not fixate, implausible result,
+        too few poses) — get the optical axis with ``default_h``; ``report.json`` says so.
+    sync, intrinsics, known_distance, eye_height : as :func:`socialcam.sfm.reconstruct_videos`.
+    options, **overrides : :class:`RunOptions` and field overrides.
+    progress : progress bars on stderr.
+
+    Raises
+    ------
+    ValueError
+        Bad arguments (naming them), an ``out_dir`` holding another run, videos that
+        cannot be posed at all.
+    """
+    from tqdm.auto import tqdm  # type: ignore[import-untyped]
+
+    opts = apply_overrides(options, RunOptions, overrides)
+    if isinstance(videos, (str, os.PathLike)) or not isinstance(videos, Sequence):
+        raise ValueError("videos: expected a sequence of video paths")
+    if len(videos) == 0:
+        raise ValueError("videos: no video given")
+    names = [Path(p).stem for p in videos]
+    if len(set(names)) != len(names):
+        raise ValueError(f"videos: two videos have the same file stem (person name): {names}")
+    for p in videos:
+        if not os.path.exists(p):
+            raise ValueError(f"videos: {p} does not exist")
+    segments = _parse_segments(calibration, names)
+    out = Path(out_dir)
+    out.mkdir(parents=True, exist_ok=True)
+    _check_owner(out, videos, overwrite)
+    t_start = time.perf_counter()
+    warns: list[str] = []
+    stages: dict[str, dict[str, Any]] = {}
+    bar = tqdm(total=len(RUN_STAGES), desc="socialcam run", unit="stage", disable=not progress)
+
+    def done(stage: str, t0: float, cached: bool) -> None:
+        stages[stage] = {"seconds": time.perf_counter() - t0, "cached": cached}
+        bar.set_postfix_str(stage)
+        bar.update(1)
+
+    def warn(msg: str) -> None:
+        warns.append(msg)
+        warnings.warn(msg, RunWarning, stacklevel=3)
+
+    try:
+        # ---------------------------------------------------------------- poses
+        t0 = time.perf_counter()
+        sfm_opts = _options(
+            None,
+            {
+                "fps": opts.fps,
+                "keyframe_fps": opts.keyframe_fps,
+                "camera_model": opts.camera_model,
+                "seed": opts.seed,
+            },
+        )
+        key = _poses_key(videos, sfm_opts, sync, intrinsics, known_distance, eye_height)
+        rec = poses(
+            videos,
+            out,
+            sync=sync,
+            intrinsics=intrinsics,
+            known_distance=known_distance,
+            eye_height=eye_height,
+            options=sfm_opts,
+            progress=progress,
+        )
+        poses_report = json.loads((out / "report.json").read_text())
+        done("poses", t0, bool(poses_report.get("cached")))
+        for n in names:
+            if n not in rec.cameras or len(rec.cameras[n]) == 0:
+                warn(f"{n}: never posed (no gaze, no charges from this wearer)")
+
+        # ---------------------------------------------------------------- calibration
+        t0 = time.perf_counter()
+        key = _hash(key, sorted(segments.items()), _opt(opts, "default_h", "max_h",
+                    "max_axis_angle", "max_eye_offset", "max_depth", "max_v_std", "max_p_std"))  # fmt: skip
+        cache = _Cache(out, "calibration", key)
+        cached = cache.valid("calibration.json")
+        if cached:
+            stored = cache.read_json("calibration.json")
+        else:
+            cache.invalidate()
+            stored = {}
+            for n in names:
+                cal, summary, why = _calibrate_one(
+                    rec.cameras.get(n),
+                    segments.get(n),
+                    opts,
+                    1.0 if np.isfinite(rec.scale) else np.nan,
+                )
+                summary["status"] = "calibrated" if why is None else "optical_axis"
+                summary["fallback_reason"] = why
+                stored[n] = {"summary": summary, "calibration": cal.to_dict()}
+            cache.write_json("calibration.json", stored)
+            cache.commit()
+        calibrations = {n: GazeCalibration.from_dict(stored[n]["calibration"]) for n in names}
+        for n in names:
+            why = stored[n]["summary"]["fallback_reason"]
+            if why is not None:
+                warn(
+                    f"{n}: gaze along the camera's optical axis with h = {opts.default_h} "
+                    f"(not calibrated: {why})"
+                )
+        done("calibration", t0, cached)
+
+        # ---------------------------------------------------------------- gaze rays
+        t0 = time.perf_counter()
+        key = _hash(key, _opt(opts, "fps", "max_pose_gap"))
+        cache = _Cache(out, "gaze", key)
+        cached = cache.valid("gaze.npz")
+        if not cached:
+            cache.invalidate()
+            arrays = _gaze_rays(rec.cameras, calibrations, opts)
+            cache.write_npz("gaze.npz", **arrays)
+            cache.commit()
+        z = cache.read_npz("gaze.npz")
+        times = z["times"]
+        gaze = {n: (z[f"{n}.p"], z[f"{n}.v"], z[f"{n}.h"]) for n in names if f"{n}.p" in z}
+        frames = _frames(names, gaze)
+        done("gaze", t0, cached)
+
+        # ---------------------------------------------------------------- charges
+        t0 = time.perf_counter()
+        charge_opts = {
+            "member_sigma": opts.member_sigma,
+            "min_members": opts.min_members,
+            "membership": opts.membership,
+        }
+        key = _hash(key, charge_opts, opts.seed)
+        cache = _Cache(out, "charges", key)
+        cached = cache.valid("charges.json")
+        if cached:
+            charges = [[_charge_from_dict(c) for c in cs] for cs in cache.read_json("charges.json")]
+        else:
+            cache.invalidate()
+            charges = _find_charges(frames, opts)
+            cache.write_json("charges.json", [[c.to_dict() for c in cs] for cs in charges])
+            cache.commit()
+        n_charges = sum(len(cs) for cs in charges)
+        if n_charges == 0:
+            warn("no social charges at all: no two wearers' gaze rays meet in any frame")
+        done("charges", t0, cached)
+
+        # ---------------------------------------------------------------- tracks
+        t0 = time.perf_counter()
+        key = _hash(key, _opt(opts, "track_bandwidth", "track_min_length"))
+        cache = _Cache(out, "tracks", key)
+        cached = cache.valid("tracks.json")
+        if cached:
+            tracks = [_track_from_dict(d) for d in cache.read_json("tracks.json")]
+        else:
+            cache.invalidate()
+            tracks = track_charges(
+                charges, bandwidth=opts.track_bandwidth, min_length=opts.track_min_length
+            )
+            cache.write_json("tracks.json", [t.to_dict() for t in tracks])
+            cache.commit()
+        done("tracks", t0, cached)
+
+        # ---------------------------------------------------------------- gaze field
+        t0 = time.perf_counter()
+        field_key = _hash(key, "field")
+        cache = _Cache(out, "field", field_key)
+        cached = cache.valid("field.npz") or cache.valid("none.json")
+        field: GazeField | None = None
+        field_note: str | None = None
+        if cached and (cache.dir / "field.npz").is_file() and cache.valid("field.npz"):
+            field = GazeField(**cache.read_npz("field.npz"))
+        elif cached:
+            field_note = str(cache.read_json("none.json")["reason"])
+        else:
+            cache.invalidate()
+            field, field_note = _fit_field(frames, times, charges, charge_opts, opts.seed)
+            for stale in ("field.npz", "none.json"):
+                (cache.dir / stale).unlink(missing_ok=True)
+            if field is not None:
+                cache.dir.mkdir(parents=True, exist_ok=True)
+                cache.write_npz(
+                    "field.npz", **{f.name: getattr(field, f.name) for f in fields(GazeField)}
+                )
+            else:
+                cache.write_json("none.json", {"reason": field_note})
+            cache.commit()
+        if field_note is not None:
+            warn(f"no gaze field: {field_note}")
+        done("field", t0, cached)
+
+        # ---------------------------------------------------------------- outputs
+        t0 = time.perf_counter()
+        atomic_write_bytes(out / "gaze.csv", gaze_csv(names, times, gaze).encode())
+        atomic_write_bytes(out / "charges.csv", charges_csv(names, times, charges, tracks).encode())
+        out_key = _hash(key, _opt(opts, "plots", "overlays"))
+        cache = _Cache(out, "outputs", out_key)
+        wanted = [f"overlay_{n}.mp4" for n in names if opts.overlays and n in rec.cameras]
+        cached = cache.valid() and all((out / f).is_file() for f in wanted)
+        overlays: dict[str, int] = {}
+        if not cached:
+            cache.invalidate()
+            if opts.plots:
+                _plots(out, names, times, charges, tracks, rec, segments)
+            if opts.overlays:
+                overlays = _overlays(videos, out, names, rec, times, charges, tracks, opts, bar)
+            cache.dir.mkdir(parents=True, exist_ok=True)
+            cache.commit()
+        done("outputs", t0, cached)
+    finally:
+        bar.close()
+
+    report: dict[str, Any] = {
+        "errors": [],
+        "names": names,
+        "wall_seconds": time.perf_counter() - t_start,
+        "stages": stages,
+        "sfm_timings": poses_report.get("timings", {}),
+        "poses": {
+            k: poses_report.get(k)
+            for k in (
+                "registered_fraction",
+                "n_frames",
+                "n_posed",
+                "n_points",
+                "scale",
+                "offsets",
+                "unplaced",
+                "warnings",
+            )
+        },
+        "calibration": {n: stored[n]["summary"] for n in names},
+        "output_frames": len(times),
+        "fps": opts.fps,
+        "frames_with_gaze": {n: int(np.isfinite(g[0]).all(axis=1).sum()) for n, g in gaze.items()},
+        "charges": {
+            "total": n_charges,
+            "frames_with_charges": int(sum(1 for cs in charges if cs)),
+            "tracks": len(tracks),
+        },
+        "field": None
+        if field is None
+        else {
+            "windows": len(field.windows),
+            "converged_fraction": float(np.mean(field.converged)) if len(field.converged) else 1.0,
+            "kappa_median": float(np.nanmedian(field.kappa))
+            if np.isfinite(field.kappa).any()
+            else None,
+        },
+        "overlays": overlays,
+        "options": asdict(opts),
+        "inputs": {
+            "videos": [os.path.abspath(p) for p in videos],
+            "calibration": {n: list(s) for n, s in segments.items()},
+            "sync": sync if sync is None or isinstance(sync, Mapping) else str(sync),
+            "known_distance": known_distance,
+            "eye_height": eye_height,
+        },
+        "warnings": list(poses_report.get("warnings", [])) + warns,
+    }
+    write_json(out / "report.json", report)
+    return RunResult(
+        out_dir=out,
+        reconstruction=rec,
+        calibrations=calibrations,
+        times=readonly(times),
+        gaze=gaze,
+        charges=charges,
+        tracks=tracks,
+        field=field,
+        report=report,
+    )
+
+
+def _opt(opts: RunOptions, *names: str) -> dict[str, Any]:
+    return {n: getattr(opts, n) for n in names}
+
+
+def _gaze_rays(
+    cameras: Mapping[str, Cameras],
+    calibrations: Mapping[str, GazeCalibration],
+    opts: RunOptions,
+    times: FloatArray | None = None,
+) -> dict[str, np.ndarray]:
+    """The output time grid (default: multiples of ``1/fps`` on the common clock covering
+    every posed frame) and per posed wearer its primary gaze rays on it (NaN where
+    unposed)."""
+    posed = {n: c for n, c in cameras.items() if len(c)}
+    arrays: dict[str, np.ndarray] = {}
+    if times is None:
+        if not posed:
+            arrays["times"] = np.zeros(0)
+            return arrays
+        lo = min(float(c.times[0]) for c in posed.values())  # type: ignore[index]
+        hi = max(float(c.times[-1]) for c in posed.values())  # type: ignore[index]
+        k0, k1 = int(np.ceil(lo * opts.fps - 1e-6)), int(np.floor(hi * opts.fps + 1e-6))
+        times = np.arange(k0, k1 + 1) / opts.fps
+    arrays["times"] = times
+    for n, cams in posed.items():
+        R, C = _pose_at(cams, times, opts.max_pose_gap / opts.fps + 1e-6)
+        ok = np.isfinite(C).all(axis=1)
+        p = np.full((len(times), 3), np.nan)
+        v = np.full((len(times), 3), np.nan)
+        h = np.full(len(times), np.nan)
+        if ok.any():
+            pp, vv, hh = calibrations[n].rays(Cameras(cams.K[0], R[ok], C[ok]))
+            p[ok], v[ok], h[ok] = pp, vv, hh
+        arrays[f"{n}.p"], arrays[f"{n}.v"], arrays[f"{n}.h"] = p, v, h
+    return arrays
+
+
+def gaze_and_charges(
+    cameras: Mapping[str, Cameras],
+    names: Sequence[str],
+    *,
+    calibration: Mapping[str, tuple[float, float]] | None = None,
+    times: npt.ArrayLike | None = None,
+    options: RunOptions | None = None,
+    **overrides: Any,
+) -> tuple[dict[str, GazeCalibration], FloatArray, list[GazeRays | None], list[list[Charge]]]:
+    """The middle of :func:`run` on given camera poses (no video, no cache): calibration →
+    gaze rays → social charges. ``cameras``: person → :class:`socialcam.Cameras` with
+    ``times`` on the common clock; ``names`` orders the persons (ray ids index it);
+    ``times``: output times (default: the ``fps`` grid). Returns the calibrations, the
+    output times, the gaze frames and the charges per frame."""
+    opts = apply_overrides(options, RunOptions, overrides)
+    segments = _parse_segments(calibration, names)
+    cals = {n: _calibrate_one(cameras.get(n), segments.get(n), opts)[0] for n in names}
+    t = None if times is None else as_float_array(times, "times", (None,))
+    arrays = _gaze_rays({n: c for n, c in cameras.items() if n in names}, cals, opts, t)
+    gaze = {
+        n: (arrays[f"{n}.p"], arrays[f"{n}.v"], arrays[f"{n}.h"])
+        for n in names
+        if f"{n}.p" in arrays
+    }
+    frames = _frames(names, gaze)
+    return cals, arrays["times"], frames, _find_charges(frames, opts)
+
+
+def _find_charges(frames: Sequence[GazeRays | None], opts: RunOptions) -> list[list[Charge]]:
+    present = [k for k, f in enumerate(frames) if f is not None]
+    found = find_charges_sequence(
+        [frames[k] for k in present],  # type: ignore[misc]
+        opts.seed,
+        member_sigma=opts.member_sigma,
+        min_members=opts.min_members,
+        membership=opts.membership,
+    )
+    charges: list[list[Charge]] = [[] for _ in frames]
+    for k, cs in zip(present, found, strict=True):
+        charges[k] = [replace(c, frame=k) for c in cs]
+    return charges
+
+
+def _fit_field(
+    frames: Sequence[GazeRays | None],
+    times: FloatArray,
+    charges: Sequence[Sequence[Charge]],
+    charge_opts: Mapping[str, Any],
+    seed: int,
+) -> tuple[GazeField | None, str | None]:
+    """:meth:`GazeField.fit` started at the charges already found (their count per frame
+    and positions); ``(None, reason)`` when there is nothing to fit."""
+    counts = np.array([len(cs) for cs in charges], dtype=np.int64)
+    if len(frames) == 0 or counts.sum() == 0:
+        return None, "no social charges"
+    imax = int(counts.max())
+    init = np.full((len(frames), imax, 3), np.nan)
+    for k, cs in enumerate(charges):
+        for i, c in enumerate(cs):
+            init[k, i] = c.position
+    fr: list[Any] = [f if f is not None else (np.zeros((0, 3)), np.zeros((0, 3))) for f in frames]
+    try:
+        with warnings.catch_warnings():
+            warnings.simplefilter("ignore", RuntimeWarning)  # coinciding charges: reported
+            field = GazeField.fit(
+                fr, counts, times=times, init=init, seed=seed, charge_options=dict(charge_opts)
+            )
+    except (ValueError, DegenerateError) as exc:
+        return None, str(exc)
+    return field, None
+
+
+def _track_index(tracks: Sequence[ChargeTrack]) -> dict[tuple[int, int], int]:
+    return {
+        (int(f), hash(pos.tobytes())): tr.id
+        for tr in tracks
+        for f, pos in zip(tr.frames, tr.positions, strict=True)
+    }
+
+
+def _plots(
+    out: Path,
+    names: Sequence[str],
+    times: FloatArray,
+    charges: Sequence[Sequence[Charge]],
+    tracks: Sequence[ChargeTrack],
+    rec: VideoReconstruction,
+    segments: Mapping[str, tuple[float, float]],
+) -> None:
+    from socialcam.io import save_figure
+    from socialcam.viz import plot_charges_over_time, plot_charges_top
+
+    save_figure(
+        plot_charges_top(charges, tracks, rec.cameras, points=rec.points),
+        out / "charges_top.png",
+    )
+    save_figure(
+        plot_charges_over_time(times, charges, tracks, names, segments=segments),
+        out / "charges_time.png",
+    )
+
+
+def _overlays(
+    videos: Sequence[str | os.PathLike[str]],
+    out: Path,
+    names: Sequence[str],
+    rec: VideoReconstruction,
+    times: FloatArray,
+    charges: Sequence[Sequence[Charge]],
+    tracks: Sequence[ChargeTrack],
+    opts: RunOptions,
+    bar: Any,
+) -> dict[str, int]:
+    track_of = _track_index(tracks)
+    written: dict[str, int] = {}
+    for i, (video, n) in enumerate(zip(videos, names, strict=True)):
+        cams = rec.cameras.get(n)
+        if cams is None or len(cams) == 0:
+            continue
+        bar.set_postfix_str(f"overlay {n}")
+        R, C = _pose_at(cams, times, opts.max_pose_gap / opts.fps + 1e-6)
+        written[n] = _overlay_video(
+            video, out / f"overlay_{n}.mp4", n, float(rec.offsets[i]), times, R, C,
+            cams.K[0], charges, names, track_of, opts.fps,
+        )  # fmt: skip
+    return written

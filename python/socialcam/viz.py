@@ -121,3 +121,87 @@ def plot_trajectories(
     ax2.legend()
     fig.tight_layout()
     return fig
+
+
+def _track_colour(tid: int) -> Any:
+    plt = _plt()
+    return plt.get_cmap("tab10")(tid % 10) if tid >= 0 else "0.6"
+
+
+def plot_charges_top(
+    charges: Any,
+    tracks: Any,
+    cameras: dict[str, Cameras],
+    *,
+    points: npt.ArrayLike | None = None,
+    title: str = "social charges, top view",
+) -> Any:
+    """Top view (x, y in metres) of every charge (grey dots), the charge tracks (coloured
+    lines, labelled by id), the wearers' camera paths and the static map points.
+    ``charges``: per frame a list of :class:`socialcam.Charge`; ``tracks``:
+    :class:`socialcam.ChargeTrack` list; ``cameras``: person → Cameras. Returns the
+    figure."""
+    plt = _plt()
+    fig, ax = plt.subplots(figsize=(7, 6))
+    if points is not None:
+        P = np.asarray(points, dtype=float).reshape(-1, 3)
+        if len(P):
+            ax.scatter(P[:, 0], P[:, 1], s=0.3, c="0.85", label="map points", rasterized=True)
+    for name, cam in cameras.items():
+        if len(cam):
+            ax.plot(cam.C[:, 0], cam.C[:, 1], lw=1, alpha=0.8, label=f"{name} (camera)")
+    allc = np.array([c.position for cs in charges for c in cs]).reshape(-1, 3)
+    if len(allc):
+        ax.scatter(allc[:, 0], allc[:, 1], s=4, c="0.4", label="charges")
+    for tr in tracks:
+        col = _track_colour(tr.id)
+        ax.plot(tr.positions[:, 0], tr.positions[:, 1], "-", c=col, lw=2)
+        ax.annotate(f"#{tr.id}", tr.positions[0, :2], color=col, fontsize=9)
+    ax.set_aspect("equal", adjustable="datalim")
+    ax.set_xlabel("x [m]")
+    ax.set_ylabel("y [m]")
+    ax.set_title(title)
+    ax.legend(loc="upper right", fontsize=7)
+    fig.tight_layout()
+    return fig
+
+
+def plot_charges_over_time(
+    times: npt.ArrayLike,
+    charges: Any,
+    tracks: Any,
+    names: Any,
+    *,
+    segments: Any = None,
+) -> Any:
+    """Charges over time: above, each charge's magnitude (coloured by track); below, for
+    every wearer, the track whose charge it belongs to at each time (calibration segments
+    shaded). Returns the figure."""
+    plt = _plt()
+    t = np.asarray(times, dtype=float)
+    fig, (ax1, ax2) = plt.subplots(2, 1, figsize=(10, 6), sharex=True)
+    track_of = {
+        (int(f), hash(p.tobytes())): tr.id
+        for tr in tracks
+        for f, p in zip(tr.frames, tr.positions, strict=True)
+    }
+    for f, cs in enumerate(charges):
+        for c in cs:
+            tid = track_of.get((f, hash(c.position.tobytes())), -1)
+            ax1.scatter(t[f], c.magnitude, s=6, color=_track_colour(tid))
+            for m in c.members:
+                ax2.scatter(t[f], int(m), s=8, marker="s", color=_track_colour(tid))
+    ax1.set_ylabel("magnitude")
+    ax1.set_title("social charges over time (colour = track; grey = no track)")
+    for i, n in enumerate(names):
+        if segments and n in segments:
+            a, b = segments[n]
+            ax2.axvspan(a, b, ymin=(i + 0.1) / len(names), ymax=(i + 0.9) / len(names),
+                        color="0.9")  # fmt: skip
+    ax2.set_yticks(range(len(names)))
+    ax2.set_yticklabels(list(names))
+    ax2.set_ylim(-0.5, len(names) - 0.5)
+    ax2.set_xlabel("time [s] (common clock)")
+    ax2.set_ylabel("member of")
+    fig.tight_layout()
+    return fig

@@ -1,0 +1,99 @@
+"""``socialcam run`` end to end on rendered scenes (issue 10): stage times and accuracy
+against the renderer's truth.
+
+For every seed given on the command line: render 4 wearers × 20 s at 640×480 (cached in
+``--cache``), run the whole chain (poses → calibration → gaze → charges → tracks → field →
+outputs) with the rendered calibration segments and the true mean camera height as
+``eye_height``, and print
+
+- every stage's wall time (SfM included; the machine's load inflates them: say so);
+- calibration errors per wearer (``v`` degrees, ``p`` cm, ``h`` ratio) — of the run (SfM
+  poses) and of the same calibration on the TRUE cameras;
+- joint attention: the fraction of (frame, group) pairs — ≥ 2 wearers looking at one
+  target for ≥ 0.6 s — with a charge of ≥ 2 of them within 0.5 m of the target (target
+  ≥ 90 %), the median error, and its ratio to the same stages on the true cameras (target
+  ≤ 1.2).
+
+Usage: ``python benches/bench_run.py 1 2 3 [--cache /tmp/run-cache] [--duration 20]``
+"""
+
+from __future__ import annotations
+
+import argparse
+import json
+import time
+import warnings
+from pathlib import Path
+
+import numpy as np
+
+from socialcam.pipeline import RunWarning, run
+from socialcam.synth.evaluate import run_vs_truth, truth_segments
+from socialcam.synth.render import load_truth, render_scene
+
+
+def main() -> None:
+    ap = argparse.ArgumentParser()
+    ap.add_argument("seeds", type=int, nargs="+")
+    ap.add_argument("--cache", default="/tmp/run-cache")
+    ap.add_argument("--duration", type=float, default=20.0)
+    ap.add_argument("--wearers", type=int, default=4)
+    ap.add_argument("--no-overlays", action="store_true")
+    args = ap.parse_args()
+    rows = []
+    for seed in args.seeds:
+        scene = Path(args.cache) / f"bench_{args.wearers}x{args.duration:g}_s{seed}"
+        if not (scene / "truth.npz").is_file():
+            t0 = time.perf_counter()
+            render_scene(scene, n_wearers=args.wearers, duration=args.duration, seed=seed)
+            print(f"seed {seed}: rendered in {time.perf_counter() - t0:.0f} s")
+        truth = load_truth(scene)
+        videos = [scene / f"{n}.mp4" for n in truth.names]
+        eye_height = float(np.mean([c[:, 2].mean() for c in truth.C]))
+        t0 = time.perf_counter()
+        with warnings.catch_warnings():
+            warnings.simplefilter("ignore", RunWarning)
+            res = run(
+                videos,
+                scene / "run",
+                calibration=truth_segments(truth),
+                eye_height=eye_height,
+                overlays=not args.no_overlays,
+            )
+        wall = time.perf_counter() - t0
+        acc = run_vs_truth(res, truth)
+        rep = res.report
+        print(f"\n=== seed {seed}: run {wall:.1f} s wall (loaded machine)")
+        print("stages:", ", ".join(f"{k} {v['seconds']:.1f}s" for k, v in rep["stages"].items()))
+        print("sfm:", ", ".join(f"{k} {v:.1f}s" for k, v in rep["sfm_timings"].items()))
+        print(f"posed {rep['poses']['n_posed']}/{rep['poses']['n_frames']}")
+        for which in ("calibration", "calibration_true_cameras"):
+            for n, c in acc[which].items():
+                print(
+                    f"{which:26s} {n}: {'calibrated' if c['calibrated'] else 'optical axis':12s}"
+                    f" v {c['v_error_deg']:5.2f}°  p {100 * c['p_error_m']:5.1f} cm  "
+                    f"h ×{c['h_ratio']:.2f}"
+                )
+        for n, c in rep["calibration"].items():
+            if c.get("fallback_reason"):
+                print(f"  {n}: fallback: {c['fallback_reason']}")
+        ja, jt = acc["joint_attention"], acc["joint_attention_true_cameras"]
+        print(
+            f"joint attention: found {ja['found']}/{ja['groups']} ({100 * ja['found_fraction']:.0f} %)"
+            f", median {100 * ja['error_median_m']:.1f} cm; true cameras: found "
+            f"{jt['found']}/{jt['groups']}, median {100 * jt['error_median_m']:.1f} cm; "
+            f"ratio {acc['error_ratio']:.2f}"
+        )
+        rows.append({"seed": seed, "wall": wall, "stages": rep["stages"], **acc})
+    print("\n" + json.dumps(rows, default=float)[:0])
+    if len(rows) > 1:
+        for key in ("found_fraction", "error_median_m"):
+            vals = [r["joint_attention"][key] for r in rows]
+            print(f"{key}: {np.nanmin(vals):.3f} .. {np.nanmax(vals):.3f} over seeds")
+        vals = [r["error_ratio"] for r in rows]
+        print(f"error_ratio: {np.nanmin(vals):.2f} .. {np.nanmax(vals):.2f} over seeds")
+        print(f"wall: {min(r['wall'] for r in rows):.0f} .. {max(r['wall'] for r in rows):.0f} s")
+
+
+if __name__ == "__main__":
+    main()

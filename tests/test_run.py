@@ -1,0 +1,189 @@
+"""``socialcam run`` end to end on a small rendered scene (3 wearers × 6 s, 640×480, seed
+8: the seed of the 12 scanned whose truth holds the most joint attention), against the
+renderer's truth; the stage cache; bad input. One module-scoped run shared by the tests."""
+
+from __future__ import annotations
+
+import csv
+import json
+import warnings
+
+import numpy as np
+import pytest
+
+from socialcam.cli import main
+from socialcam.pipeline import RunWarning, load_run_config, run
+from socialcam.synth.evaluate import run_vs_truth
+from socialcam.synth.render import render_scene
+
+#: wearer0 is given a "calibration" segment in which it walks and looks around.
+NOT_FIXATING = {"wearer0": (1.0, 3.0)}
+
+
+@pytest.fixture(scope="module")
+def scene(tmp_path_factory):
+    out = tmp_path_factory.mktemp("runscene")
+    res = render_scene(
+        out / "scene", n_wearers=3, duration=6.0, seed=8, calibration=False, progress=False
+    )
+    return res
+
+
+def _eye_height(truth):
+    return float(np.mean([c[:, 2].mean() for c in truth.C]))
+
+
+def _run(scene, out, **kw):
+    with warnings.catch_warnings():
+        warnings.simplefilter("ignore", RunWarning)
+        return run(
+            list(scene.videos),
+            out,
+            calibration=NOT_FIXATING,
+            eye_height=_eye_height(scene.truth),
+            progress=False,
+            **kw,
+        )
+
+
+@pytest.fixture(scope="module")
+def first(scene, tmp_path_factory):
+    out = tmp_path_factory.mktemp("run") / "out"
+    return _run(scene, out), out
+
+
+def test_outputs_and_report(first, scene):
+    res, out = first
+    names = list(scene.truth.names)
+    for f in ("poses.csv", "sync.json", "gaze.csv", "charges.csv", "report.json",
+              "charges_top.png", "charges_time.png"):  # fmt: skip
+        assert (out / f).stat().st_size > 0, f
+    for n in names:
+        assert (out / f"overlay_{n}.mp4").stat().st_size > 10_000
+        assert res.report["overlays"][n] > 0.8 * 6 * res.report["fps"]
+    rows = list(csv.DictReader((out / "gaze.csv").read_text().splitlines()))
+    assert list(rows[0]) == ["person", "time", "px", "py", "pz", "vx", "vy", "vz", "h"]
+    assert {r["person"] for r in rows} == set(names)
+    v = np.array([[float(r[k]) for k in ("vx", "vy", "vz")] for r in rows])
+    np.testing.assert_allclose(np.linalg.norm(v, axis=1), 1.0, atol=1e-6)
+    ch = list(csv.DictReader((out / "charges.csv").read_text().splitlines()))
+    assert list(ch[0]) == ["time", "track", "x", "y", "z", "magnitude", "members"]
+    for r in ch:
+        members = r["members"].split(";")
+        assert len(members) >= 2 and set(members) <= set(names)
+    rep = json.loads((out / "report.json").read_text())
+    assert list(rep["stages"]) == ["poses", "calibration", "gaze", "charges", "tracks",
+                                   "field", "outputs"]  # fmt: skip
+    assert all(s["seconds"] >= 0 for s in rep["stages"].values())
+    # wearer0 walked and looked around in its "segment": stated fallback, no calibration
+    cal0 = rep["calibration"]["wearer0"]
+    assert cal0["status"] == "optical_axis" and cal0["fallback_reason"]
+    assert any(
+        w.startswith("wearer0: gaze along the camera's optical axis") for w in rep["warnings"]
+    )
+    assert any("wearer1" in w and "no calibration segment" in w for w in rep["warnings"])
+    assert res.field is not None and rep["field"]["windows"] >= 1
+    assert len(res.tracks) >= 1
+
+
+def test_joint_attention_against_truth(first, scene):
+    res, _out = first
+    acc = run_vs_truth(res, scene.truth)
+    ja, ref = acc["joint_attention"], acc["joint_attention_true_cameras"]
+    assert ja["groups"] >= 10 and ref["groups"] == ja["groups"]
+    # Nobody is calibrated here (no range of motion in this scene): the optical axis, which
+    # the renderer pitches 4-12° below the primary gaze, puts the charges ~0.3 m from the
+    # targets. Measured (seed 8, loaded machine): 17 of 22 groups found within 0.5 m, median
+    # 0.319 m; on the true cameras 17 of 22, 0.321 m: ratio 0.99 (issue target ≤ 1.2).
+    assert ja["found_fraction"] >= 0.6, ja
+    assert ja["error_median_m"] < 0.4, ja
+    assert acc["error_ratio"] <= 1.2, acc
+
+
+def test_rerun_resumes_and_reruns_only_what_changed(first, scene):
+    _res, out = first
+    # everything cached
+    again = _run(scene, out)
+    assert all(s["cached"] for s in again.report["stages"].values()), again.report["stages"]
+    assert (out / "charges.csv").read_text() == (out / "charges.csv").read_text()
+    # a crash in the tracks stage: its key is missing, it and what follows rerun
+    (out / "cache" / "tracks" / "key.txt").unlink()
+    again = _run(scene, out)
+    cached = {k: s["cached"] for k, s in again.report["stages"].items()}
+    assert cached["poses"] and cached["calibration"] and cached["gaze"] and cached["charges"]
+    assert not cached["tracks"]
+    # a changed charge option reruns charges onwards, not poses / calibration / gaze
+    again = _run(scene, out, member_sigma=2.0)
+    cached = {k: s["cached"] for k, s in again.report["stages"].items()}
+    assert cached["poses"] and cached["calibration"] and cached["gaze"]
+    assert not cached["charges"] and not cached["field"]
+    # no charges at all (more members than wearers): valid output, stated
+    none = _run(scene, out, min_members=5)
+    assert none.report["charges"]["total"] == 0 and none.field is None
+    assert any("no social charges" in w for w in none.report["warnings"])
+    assert (out / "charges.csv").read_text().strip() == "time,track,x,y,z,magnitude,members"
+    _run(scene, out)  # back to the defaults for the other tests
+
+
+def test_out_dir_of_another_run_is_refused(first, scene, tmp_path):
+    _res, out = first
+    before = (out / "poses.csv").read_bytes()
+    with pytest.raises(ValueError, match="another run"):
+        run(list(scene.videos[:2]), out, progress=False)
+    assert (out / "poses.csv").read_bytes() == before
+
+
+def test_cli_run(first, scene, tmp_path, capsys):
+    _res, out = first
+    cfg = tmp_path / "run.toml"
+    h = _eye_height(scene.truth)
+    cfg.write_text(f"eye_height = {h}\n[calibration]\nwearer0 = [1.0, 3.0]\n")
+    args = ["run", *map(str, scene.videos), "--out", str(out), "--config", str(cfg)]
+    assert main(args) == 0  # all cached: the same inputs as the fixture's run
+    text = capsys.readouterr()
+    assert "cached" in text.out and "results written" in text.out
+    assert "wearer0: gaze along the camera's optical axis" in text.err
+
+
+def test_cli_bad_input(scene, tmp_path, capsys):
+    vids = list(map(str, scene.videos))
+    with pytest.raises(SystemExit):
+        main(["run", *vids, "--out", str(tmp_path), "--calibration", "wearer0=1-3"])
+    assert "--calibration" in capsys.readouterr().err
+    cfg = tmp_path / "bad.toml"
+    cfg.write_text("fsp = 10\n")
+    with pytest.raises(SystemExit):
+        main(["run", *vids, "--out", str(tmp_path), "--config", str(cfg)])
+    assert "fsp" in capsys.readouterr().err
+    cfg.write_text("[intrinsics.wearer0]\nK = 3\n")
+    with pytest.raises(SystemExit):
+        main(["run", *vids, "--out", str(tmp_path), "--config", str(cfg)])
+    assert "intrinsics" in capsys.readouterr().err
+    assert main(["run", *vids, "--out", str(tmp_path), "--calibration", "nobody=1:3"]) == 2
+    assert "nobody" in capsys.readouterr().err
+    with pytest.raises(ValueError, match="calibration"):
+        run(vids, tmp_path, calibration={"wearer0": (3.0, 1.0)}, progress=False)
+    with pytest.raises(ValueError, match="videos"):
+        run([str(tmp_path / "missing.mp4")], tmp_path, progress=False)
+    with pytest.raises(ValueError, match="fps"):
+        run(vids, tmp_path, fps=0, progress=False)
+
+
+def test_load_run_config(tmp_path):
+    cfg = tmp_path / "c.toml"
+    cfg.write_text("[run]\nfps = 5\nmember_sigma = 2.0\noffsets = {a = 0.5}\n")
+    opts, inputs = load_run_config(cfg)
+    assert opts == {"fps": 5, "member_sigma": 2.0} and inputs == {"offsets": {"a": 0.5}}
+    with pytest.raises(ValueError, match="config"):
+        load_run_config(tmp_path / "nope.toml")
+
+
+def test_view_writes_a_rerun_recording(first, tmp_path):
+    pytest.importorskip("rerun", reason="the optional 'rerun' extra is not installed")
+    from socialcam.view import write_rrd
+
+    _res, out = first
+    path = write_rrd(out, tmp_path / "r.rrd", frames=False)
+    assert path.stat().st_size > 10_000
+    with pytest.raises(ValueError, match="no finished socialcam run"):
+        write_rrd(tmp_path, tmp_path / "x.rrd")

@@ -1,0 +1,161 @@
+"""The calibration → gaze → charges stages of ``socialcam run`` on exact synthetic poses
+(no video): wearers calibrate (Eq 3.1 range of motion), then look at one common target.
+Measures what calibration buys for joint attention against the truth."""
+
+import numpy as np
+import pytest
+from scipy.spatial.transform import Rotation
+
+from socialcam import synth
+from socialcam.camera import Cameras
+from socialcam.pipeline import RunOptions, gaze_and_charges
+
+FPS = 30.0
+
+
+def _wearers(seed, n=3, h=0.01, calib_frames=300, look_frames=150):
+    """``n`` wearers: a range-of-motion segment (``calib_frames``), then each stands 1.5–2.5 m
+    from a common target and looks at it (primary ray off by the Sec 3.1 deviation ``h``).
+    Returns names, cameras, calibration segments, truth (eye, direction per wearer), the
+    target and the time the looking starts."""
+    rng = np.random.default_rng(seed)
+    target = np.array([0.0, 0.0, 1.5])
+    names, cams, truth = [], {}, {}
+    t_look = calib_frames / FPS
+    for w in range(n):
+        eye = np.r_[rng.uniform(-0.01, 0.01), rng.uniform(0.06, 0.09), rng.uniform(-0.05, -0.02)]
+        d = np.r_[
+            np.tan(np.radians(rng.uniform(-3, 3))), -np.tan(np.radians(rng.uniform(4, 12))), 1
+        ]
+        seg = synth.fixation_segment(
+            calib_frames, h=h, eye=eye, direction=d, target=rng.uniform(-0.3, 0.3, 3) + np.array([0, 0, 1.3]),
+            seed=seed * 10 + w,
+        )  # fmt: skip
+        d = seg.direction
+        # second phase: stand around the target, look at it
+        ang = 2 * np.pi * w / n + rng.uniform(-0.3, 0.3)
+        dist = rng.uniform(1.5, 2.5)
+        base = target + np.r_[dist * np.cos(ang), dist * np.sin(ang), rng.uniform(-0.1, 0.2)]
+        k = np.arange(look_frames)
+        eyes = base + 0.05 * np.c_[np.sin(k / 20 + w), np.cos(k / 23 + w), 0 * k]
+        u = target - eyes
+        u /= np.linalg.norm(u, axis=1, keepdims=True)
+        w_ = synth.people.primary_from_true(u, h, rng)
+        R = np.empty((look_frames, 3, 3))
+        C = np.empty((look_frames, 3))
+        for i in range(look_frames):
+            align, _ = Rotation.align_vectors(w_[i][None], d[None])
+            M = (Rotation.from_rotvec(w_[i] * rng.uniform(-0.2, 0.2)) * align).as_matrix()
+            R[i], C[i] = M.T, eyes[i] - M @ seg.eye
+        # move the calibration somewhere in the room (rigid shift: same geometry)
+        shift = np.r_[4.0 * w, -3.0, 0.0]
+        name = f"w{w}"
+        names.append(name)
+        cams[name] = Cameras(
+            seg.cameras.K[0],
+            np.concatenate([seg.cameras.R, R]),
+            np.concatenate([seg.cameras.C + shift, C]),
+            np.arange(calib_frames + look_frames) / FPS,
+        )
+        truth[name] = (seg.eye, d)
+    segments = {n: (0.0, t_look - 1 / FPS) for n in names}
+    return names, cams, segments, truth, target, t_look
+
+
+def _charge_errors(names, charges, times, target, t_look):
+    errs, present = [], []
+    for k, t in enumerate(times):
+        if t < t_look + 0.2:
+            continue
+        d = [np.linalg.norm(c.position - target) for c in charges[k] if len(c.members) >= 2]
+        present.append(bool(d))
+        if d:
+            errs.append(min(d))
+    return np.array(errs), np.mean(present)
+
+
+def _angle_deg(a, b):
+    return float(np.degrees(np.arccos(np.clip(np.dot(a, b), -1.0, 1.0))))
+
+
+@pytest.mark.parametrize("seed", [0, 1])
+def test_calibration_stage_recovers_truth_and_improves_joint_attention(seed):
+    names, cams, segments, truth, target, t_look = _wearers(seed)
+    cals, times, frames, charges = gaze_and_charges(cams, names, calibration=segments)
+    # every wearer's gaze rays pass through the target they look at, on average (the
+    # eye-in-head deviation averages out): a biased eye centre or direction shows here.
+    # Measured on seeds 0-5: at most 1.5 cm.
+    for i, n in enumerate(names):
+        off = []
+        for k, f in enumerate(frames):
+            if times[k] < t_look + 0.2 or f is None or i not in f.ids:
+                continue
+            j = int(np.flatnonzero(f.ids == i)[0])
+            d = target - f.p[j]
+            off.append(d - (d @ f.v[j]) * f.v[j])
+        assert np.linalg.norm(np.mean(off, axis=0)) < 0.02, (n, np.mean(off, axis=0))
+    for n in names:
+        c = cals[n]
+        eye, d = truth[n]
+        assert c.calibrated, n
+        # the issue's targets (measured on seeds 0-5: v ≤ 0.41°, p ≤ 1.8 cm, h within 9 %)
+        assert _angle_deg(c.v, d) < 0.5
+        assert np.linalg.norm(c.p - (eye - (eye @ d) * d)) < 0.02
+        assert abs(c.h / 0.01 - 1) < 0.2
+    err, present = _charge_errors(names, charges, times, target, t_look)
+    assert present >= 0.95
+    # measured on seeds 0-5: median 2.5-3.5 cm calibrated; 12-47 cm along the optical axis
+    assert np.median(err) < 0.05, np.median(err)
+    # along the optical axis (no calibration) the same rays miss by far more
+    _c, times2, _f, charges2 = gaze_and_charges(cams, names, calibration=None)
+    err2, _ = _charge_errors(names, charges2, times2, target, t_look)
+    assert np.median(err2) > 2 * np.median(err)
+
+
+def test_fallbacks_are_stated():
+    names, cams, _segments, _truth, _target, t_look = _wearers(5)
+    # w0: a segment where it looks at the common target from a nearly fixed spot (±5 cm):
+    # no range of motion, the eye centre is undetermined (standard error ≈ 11 cm); w1: no
+    # segment; w2: never posed.
+    segs = {"w0": (t_look + 0.5, t_look + 4.5)}
+    cams = {k: v for k, v in cams.items() if k != "w2"}
+    from socialcam.pipeline import _calibrate_one
+
+    opts = RunOptions()
+    _c, _s, why0 = _calibrate_one(cams["w0"], segs["w0"], opts)
+    assert why0 is not None and "eye centre" in why0
+    _c, _s, why1 = _calibrate_one(cams["w1"], None, opts)
+    assert why1 == "no calibration segment"
+    _c, _s, why2 = _calibrate_one(None, (0.0, 1.0), opts)
+    assert "never posed" in why2
+    cals, _t, _f, _ch = gaze_and_charges(cams, names, calibration=segs)
+    assert not any(c.calibrated for c in cals.values())
+    assert all(c.h == opts.default_h for c in cals.values())
+
+
+def test_not_fixating_is_detected():
+    # a wearer who looks around (fixates nothing) during the given segment
+    rng = np.random.default_rng(0)
+    n = 100
+    C = np.c_[np.linspace(0, 3, n), np.zeros(n), np.full(n, 1.6)]
+    look = C + np.c_[rng.normal(0, 1, n), np.full(n, 3.0), rng.normal(0, 0.5, n)]
+    R = synth.look_at(C, look)
+    cams = Cameras(synth.intrinsics(), R, C, np.arange(n) / 10)
+    from socialcam.pipeline import _calibrate_one
+
+    cal, _summary, why = _calibrate_one(cams, (0.0, 10.0), RunOptions())
+    assert why is not None and not cal.calibrated
+
+
+def test_calibration_round_trips_through_json():
+    # the calibration stage caches GazeCalibration as JSON (NaN written as null)
+    import json
+
+    from socialcam import GazeCalibration, calibrate_gaze
+    from socialcam.io import _jsonable
+
+    for cal in (calibrate_gaze(synth.fixation_segment(50, seed=1).cameras),
+                GazeCalibration.optical_axis(0.04)):  # fmt: skip
+        back = GazeCalibration.from_dict(json.loads(json.dumps(_jsonable(cal.to_dict()))))
+        for k, v in cal.to_dict().items():
+            np.testing.assert_array_equal(getattr(back, k), v)
