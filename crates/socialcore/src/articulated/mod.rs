@@ -559,12 +559,8 @@ type Evaluated = (f64, Matrix3<f64>, Refined);
 /// degrees of freedom, the noise variance estimated from the lowest cost), the smoothest
 /// in the sense of Eq 4.12 wins if it is clearly smoother (roughness below [`SMOOTHER`]
 /// times that of the lowest-cost start); `None` keeps the lowest cost.
-fn select_start(
-    starts: &[(f64, f64, Matrix3<f64>, Refined, BqpSolution, usize, f64)],
-    n_obs: usize,
-    k: usize,
-    tol: Option<f64>,
-) -> Option<usize> {
+/// `starts` holds `(reprojection cost, roughness)` per start.
+fn select_start(starts: &[(f64, f64)], n_obs: usize, k: usize, tol: Option<f64>) -> Option<usize> {
     let lowest = (0..starts.len()).min_by(|&a, &b| starts[a].0.total_cmp(&starts[b].0))?;
     let Some(tol) = tol else {
         return Some(lowest);
@@ -756,8 +752,9 @@ pub fn reconstruct_articulated(
             }
         }
     }
+    let scores: Vec<(f64, f64)> = starts.iter().map(|s| (s.0, s.1)).collect();
     let pick = select_start(
-        &starts,
+        &scores,
         obs.len(),
         opts.k,
         robust.then_some(opts.select_tol),
