@@ -257,7 +257,8 @@ class ArticulatedOptions:
         sphere shrunk to the ``tangent_quantile`` of the parent-to-ray distances (the
         near-grazing rays then touch it once, both roots' evidence merged), refines each
         start with the bone length free within ``length_tol``, and keeps the start with
-        the lowest reprojection error.
+        the lowest reprojection error unless a clearly smoother one fits the pixels as
+        well (``select_tol``).
     fit_radius : set the thesis sphere to the largest parent-to-ray distance instead of
         only enlarging the given length when a ray misses.
     tangent_quantile : robust method: quantile in [0, 1] of the parent-to-ray distances

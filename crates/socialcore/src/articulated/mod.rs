@@ -29,7 +29,8 @@ pub enum ArticulatedMethod {
     /// quantile of the parent-to-ray distances (near-grazing rays then touch the sphere at
     /// one point, so the true trajectory can pass from one root to the other), each start
     /// is refined with the bone length free within `length_tol`, and the start with the
-    /// lowest reprojection error wins.
+    /// lowest reprojection error wins unless a clearly smoother one fits the pixels as
+    /// well (`select_tol`).
     Robust,
 }
 
