@@ -82,6 +82,28 @@ def test_bqp_bad_input() -> None:
         sc.solve_bqp(np.eye(2), time_limit=-1.0)
 
 
+def _orbit(P: np.ndarray, aim: np.ndarray) -> tuple[sc.Cameras, np.ndarray]:
+    """One camera per frame (60 Hz, f = 1000 px) on a 1 rad arc 1.5 m from ``aim`` (F, 3),
+    0.3 m above it, looking at it; and the pixels of the points ``P`` (F, J, 3)."""
+    F = P.shape[0]
+    walk = aim[-1] - aim[0]
+    walk[1] = 0
+    walk /= np.linalg.norm(walk)
+    side = np.cross(walk, [0.0, 1.0, 0.0])
+    ang = np.linspace(-0.5, 0.5, F)[:, None]
+    C = aim + 1.5 * (np.cos(ang) * side + np.sin(ang) * walk) + [0.0, 0.3, 0.0]
+    K = np.array([[1000.0, 0, 640], [0, 1000.0, 360], [0, 0, 1]])
+    cams = sc.Cameras(K, look_at(C, aim, up=(0.0, 1.0, 0.0)), C, np.arange(F) / 60)
+    Ks = np.broadcast_to(K, (F, 3, 3))
+    px = np.stack(
+        [
+            sc._core.project(Ks[i : i + 1], cams.R[i : i + 1], C[i : i + 1], P[i])[0][0]
+            for i in range(F)
+        ]
+    )
+    return cams, px
+
+
 # ----------------------------------------------------------- articulated, real mocap
 class Scene:
     """CMU subject 131 walking (real motion), 60 frames at 60 Hz, seen by one camera per
@@ -91,23 +113,8 @@ class Scene:
         m = load_bvh(DATA / "mocap" / "cmu_131_01_walk300.bvh")
         self.skeleton, keep = sc.Skeleton.from_bvh(m)
         P = m.positions[::2][:60][:, keep]
-        F = P.shape[0]
-        d = P[-1, 0] - P[0, 0]
-        d[1] = 0
-        d /= np.linalg.norm(d)
-        side = np.cross(d, [0.0, 1.0, 0.0])
-        ang = np.linspace(-0.5, 0.5, F)
-        C = P[:, 0] + 1.5 * (np.cos(ang)[:, None] * side + np.sin(ang)[:, None] * d)
-        C += [0.0, 0.3, 0.0]
-        K = np.array([[1000.0, 0, 640], [0, 1000.0, 360], [0, 0, 1]])
-        self.cams = sc.Cameras(K, look_at(C, P[:, 0], up=(0.0, 1.0, 0.0)), C, np.arange(F) / 60)
+        self.cams, self.px = _orbit(P, P[:, 0])
         self.P = P
-        self.px = np.stack(
-            [
-                sc._core.project(K[None], self.cams.R[i : i + 1], C[i : i + 1], P[i])[0][0]
-                for i in range(F)
-            ]
-        )
         self.k = 8
         self.eta = {
             j: sc.articulated_reconstructability(
@@ -315,3 +322,62 @@ def test_articulated_options_validation(scene: Scene) -> None:
         sc.reconstruct_articulated(x, scene.cams, par, float("nan"))
     opts = sc.ArticulatedOptions(k=6, method="thesis")
     assert sc.ArticulatedOptions(**opts.to_dict()) == opts
+
+
+# ------------------------------- robust method, start selection (issue 12), C3D markers
+def _marker_window() -> tuple[np.ndarray, list[tuple[int, int]], sc.Cameras, np.ndarray]:
+    """CMU subject 85 trial 02 (optical markers, 120 Hz), frames 0, 2, …, 118: each marker
+    articulated to the marker whose distance to it varies least (a nearly rigid "bone"),
+    seen by one camera per frame orbiting the body centre at 1.5 m (as the bench)."""
+    from socialcam.mocap import load_c3d
+
+    P = load_c3d(DATA / "mocap" / "cmu_85_02.c3d").positions
+    P = P[:, np.isfinite(P).all(axis=(0, 2))][::2][:60]
+    pairs = []
+    for j in range(P.shape[1]):
+        d = np.linalg.norm(P[:, j, None] - P, axis=2)  # (F, M)
+        mean = d.mean(0)
+        ok = (mean >= 0.1) & (mean <= 0.5)
+        rel = np.full(len(mean), np.inf)
+        rel[ok] = d.std(0)[ok] / mean[ok]
+        if rel.min() < 0.02:
+            pairs.append((j, int(rel.argmin())))
+    cams, px = _orbit(P, P.mean(axis=1))
+    return P, pairs, cams, px
+
+
+def test_robust_start_selection_on_markers() -> None:
+    # Fig 4.3(c) conditions on another clip (optical markers), the joints with η_a > 1.25.
+    # The pixels cannot tell the truth's basin from the impostor's (after the refinement
+    # of Eq 4.5 the impostor often reprojects a few px² better), so the robust method keeps
+    # a clearly smoother start that the pixels cannot reject. Measured (seed 0, 31 joints):
+    # mean 0.185, median 0.060, 23 joints below 0.15; keeping the lowest cost
+    # (select_tol=0): mean 0.234 (two more joints at 0.98 and 0.52); the thesis method:
+    # mean 0.278; without the refinement of Eq 4.5: mean 0.265. (Two joints, at 1.31 and
+    # 1.80, still follow the impostor: the thesis method gets them right.)
+    P, pairs, cams, px = _marker_window()
+    F = P.shape[0]
+    errs: dict[str, list[float]] = {"robust": [], "mincost": [], "thesis": []}
+    for j, p in pairs:
+        if sc.articulated_reconstructability(P[:, j], cams, P[:, p], 8) <= 1.25:
+            continue
+        rng = np.random.default_rng(17 * j)
+        r = float(np.linalg.norm(P[:, j] - P[:, p], axis=1).mean())
+        x = px[:, j] + rng.normal(0, 1.0, (F, 2))
+        x[rng.random(F) < 0.05] = np.nan
+        parent = P[:, p] + _smooth_offset(F, 0.05 * r, rng)
+        den = np.linalg.norm(P[:, j] - P[:, p])
+        for name, kw in (
+            ("robust", {}),
+            ("mincost", {"select_tol": 0.0}),
+            ("thesis", {"method": "thesis"}),
+        ):
+            out = sc.reconstruct_articulated(x, cams, parent, 1.05 * r, k=8, **kw)
+            errs[name].append(float(np.linalg.norm(out.points - P[:, j]) / den))
+    robust = np.array(errs["robust"])
+    assert len(robust) >= 25, len(robust)
+    assert robust.mean() < 0.21, errs["robust"]
+    assert np.median(robust) < 0.08, errs["robust"]
+    assert np.mean(robust < 0.15) >= 0.7, errs["robust"]
+    assert robust.mean() < 0.9 * np.mean(errs["mincost"]), errs
+    assert robust.mean() < 0.8 * np.mean(errs["thesis"]), errs

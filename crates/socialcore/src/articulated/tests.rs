@@ -281,3 +281,32 @@ fn skeleton_chain_recursive() {
         .fold(0.0, f64::max);
     assert!(err_b < 0.05, "joint b error {err_b}");
 }
+
+#[test]
+fn start_selection_needs_indistinguishable_cost_and_clearly_smoother() {
+    // 50 observations, k = 8: 83 degrees of freedom; lowest cost 83 → σ² = 1 and the
+    // tolerance 1.5 · √166 ≈ 19.3 px².
+    let base = (83.0, 1e-3);
+    // Within the tolerance and 10× smoother: taken.
+    assert_eq!(
+        select_start(&[base, (95.0, 1e-4)], 50, 8, Some(1.5)),
+        Some(1)
+    );
+    // Outside the tolerance: the pixels reject it.
+    assert_eq!(
+        select_start(&[base, (110.0, 1e-4)], 50, 8, Some(1.5)),
+        Some(0)
+    );
+    // Only a little smoother (above SMOOTHER × the lowest-cost roughness): not enough.
+    assert_eq!(
+        select_start(&[base, (84.0, 0.5e-3)], 50, 8, Some(1.5)),
+        Some(0)
+    );
+    // Selection off (thesis method, or select_tol = 0): the lowest cost.
+    assert_eq!(select_start(&[base, (84.0, 1e-5)], 50, 8, None), Some(0));
+    assert_eq!(
+        select_start(&[(90.0, 1e-5), base], 50, 8, Some(0.0)),
+        Some(1)
+    );
+    assert_eq!(select_start(&[], 50, 8, Some(1.5)), None);
+}
