@@ -78,7 +78,11 @@ class GazeFieldOptions:
     max_iter, tol : EM cap and convergence tolerance (metres, and relative for ``κ``)
     inner_iterations : M-step iterations per EM iteration
     seed : seed of the charge finder's random seeds (``n_charges=None``)
-    charge_options : keyword arguments for :func:`socialcam.find_charges_sequence`
+    charge_options : keyword arguments for :func:`socialcam.find_charges_sequence`; the
+        EM starts from modes of the saliency field, so ``membership`` defaults to
+        ``"strongest"`` here (the ``"partition"`` rule pairs stray rays with members of
+        groups, which costs the field 10° of cross-validated gaze error when two members
+        look at random)
     """
 
     kappa: float | None = None
@@ -620,6 +624,7 @@ def _charges_from_chapter6(
     parts = flat.to_frames()
     idx = [k for k, (p, _, _, _) in enumerate(parts) if len(p)]
     rays = [GazeRays(*parts[k]) for k in idx]
+    options = {"membership": "strongest", **options}
     found = find_charges_sequence(rays, seed, **options) if idx else []
     counts = np.zeros(flat.n_frames, dtype=np.int64)
     cmax = max((len(c) for c in found), default=0)
