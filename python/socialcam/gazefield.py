@@ -70,8 +70,12 @@ class GazeFieldOptions:
     lambda_g : weight ``λ_g ≥ 0`` of the temporal filter ``G`` (Eq 7.14), per frame
     temporal_filter : ``"velocity"`` (``Σ‖r(t) − r(t−1)‖²``) or ``"acceleration"``
         (``Σ‖2r(t) − r(t−1) − r(t+1)‖²``), thesis footnote 3
-    membership : ``"window"`` — one membership per member and window (Eq 7.14);
-        ``"frame"`` — re-estimated at every frame (Eq 7.11)
+    membership : ``"frame"`` (default) — re-estimated at every frame (Eq 7.11);
+        ``"window"`` — one membership per member and window (Eq 7.14). In a window that
+        spans a change of groups, one membership per window gives a member's rays after
+        the change to its old charge, and every EM iteration hardens that: on the meeting
+        scene (seed 0) the worst charge error grows from 18 cm after one iteration to
+        1.06 m at convergence, while per-frame memberships stay at 6–14 cm
     max_angle : radians in ``(0, π/2)``; rays further than this from a charge (or with it
         behind them) add a constant to the M-step cost instead of ``d = ∞``
     min_window : count runs shorter than this many frames are merged into a neighbour
@@ -89,7 +93,7 @@ class GazeFieldOptions:
     kappa_init: float | None = None
     lambda_g: float = 1.0
     temporal_filter: Literal["velocity", "acceleration"] = "velocity"
-    membership: Literal["window", "frame"] = "window"
+    membership: Literal["window", "frame"] = "frame"
     max_angle: float = float(np.pi / 6)
     min_window: int = 3
     max_iter: int = 200
