@@ -251,7 +251,7 @@ class Charge:
         return out
 
 
-MEMBERSHIP_RULES = ("cover", "strongest", "all")
+MEMBERSHIP_RULES = ("partition", "cover", "strongest", "all")
 
 
 @dataclass(frozen=True)
@@ -274,16 +274,24 @@ class ChargeOptions:
     member_sigma : a ray can be a member of a charge within ``member_sigma`` bandwidths
         (``‖d/h‖ ≤ member_sigma``, Eq 6.2)
     min_members : fewest member rays of a charge (Sec 6.2: more than one ray)
-    membership : ``"strongest"`` (default) — winner-take-all: a ray counts only for the
-        strongest charge it is within ``member_sigma`` of, and ``min_members`` applies to
-        the rays still free (rejects crossings of different groups' rays behind their
-        targets); ``"all"`` — the thesis' rule (every mode with ``min_members`` rays
-        within ``member_sigma``; a ray may count for several); ``"cover"``
-        (experimental) — each ray belongs to the candidate it fits best and the set of
-        charges is the one that explains the rays best (score ``−½Σ‖d/h‖² −
+    membership : ``"partition"`` (default) — every ray belongs to at most one charge, by
+        likelihood under each charge's perspective-distance kernel (Eq 6.2, gaze model of
+        Sec 3.1); each charge sits at the least-squares intersection of its members'
+        rays (weights ``1/(s²h²)``, ``s`` the depth), not at a mode of the field; the set
+        of charges is the partition of the rays with the highest likelihood minus an
+        Occam cost per charge that scales with the bandwidths and distances (prior volume:
+        the ``bounds`` box, else a cube of side ``depth_range[1]``), found by hard EM from
+        the mean-shift modes; ``"strongest"`` — winner-take-all: a ray counts only for the
+        strongest mode it is within ``member_sigma`` of, and ``min_members`` applies to
+        the rays still free; ``"all"`` — the thesis' rule (every mode with
+        ``min_members`` rays within ``member_sigma``; a ray may count for several);
+        ``"cover"`` (experimental) — each ray belongs to the candidate it fits best and
+        the set of charges is the one that explains the rays best (score ``−½Σ‖d/h‖² −
         ½ member_sigma² · #rays left out − charge_penalty · #charges``), each charge at
         the mode of its members' own field
     charge_penalty : ``"cover"`` only: the price of one more charge, in units of ``½‖d/h‖²``
+    unattended : ``"partition"`` only: prior probability that a ray attends no charge (it
+        then points anywhere); in (0, 1)
     min_magnitude : charges with a weaker field value are rejected
     bounds : ``(lo, hi)`` (3,) corners of a box (a room) outside of which modes are rejected
     region_level : the confidence region is where the field exceeds this fraction of the
@@ -300,8 +308,9 @@ class ChargeOptions:
     merge_radius: float = 0.2
     member_sigma: float = 2.5
     min_members: int = 2
-    membership: str = "strongest"
+    membership: str = "partition"
     charge_penalty: float = 2.0
+    unattended: float = 0.05
     min_magnitude: float = 0.0
     bounds: tuple[tuple[float, float, float], tuple[float, float, float]] | None = None
     region_level: float = 0.8
@@ -328,6 +337,9 @@ class ChargeOptions:
         check_int(self.min_members, "min_members", min=1)
         check_choice(self.membership, "membership", MEMBERSHIP_RULES)
         check_float(self.charge_penalty, "charge_penalty", min=0.0)
+        check_float(self.unattended, "unattended", min=0.0, min_exclusive=True, max=1.0)
+        if self.unattended >= 1.0:
+            raise ValueError(f"unattended: expected a number < 1, got {self.unattended}")
         check_float(self.min_magnitude, "min_magnitude")
         if self.bounds is not None:
             if not isinstance(self.bounds, (tuple, list)) or len(self.bounds) != 2:
@@ -341,7 +353,7 @@ class ChargeOptions:
         if self.region_level >= 1.0:
             raise ValueError(f"region_level: expected a number < 1, got {self.region_level}")
         check_float(self.region_max_radius, "region_max_radius", min=0.0, min_exclusive=True)
-        for name in ("tol", "merge_radius", "member_sigma", "charge_penalty", "min_magnitude",
+        for name in ("tol", "merge_radius", "member_sigma", "charge_penalty", "unattended", "min_magnitude",
                      "region_level", "region_max_radius"):  # fmt: skip
             object.__setattr__(self, name, float(getattr(self, name)))
         for name in ("seeds_per_ray", "max_iter", "min_members"):
@@ -409,8 +421,10 @@ def find_charges(
     Newton steps with ``newton``) until it moves less than ``tol`` metres; climbs still
     moving after ``max_iter`` iterations are dropped; modes closer than ``merge_radius``
     are merged in seed order. Which modes are charges, and which rays are their members,
-    is decided by ``membership`` (see :class:`ChargeOptions`; the default ``"strongest"``
-    gives each ray to the strongest charge it is near, ``"all"`` is the thesis' rule).
+    is decided by ``membership`` (see :class:`ChargeOptions`; the default ``"partition"``
+    gives each ray to at most one charge and places each charge at the intersection of
+    its members' rays, ``"all"`` is the thesis' rule). Give the room as ``bounds``: it
+    rejects modes outside it and sets the prior volume of the ``"partition"`` rule.
     ``bounds=(lo, hi)`` rejects modes outside a box (a room); ``min_magnitude`` weak modes.
 
     Parameters

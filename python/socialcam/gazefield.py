@@ -70,22 +70,30 @@ class GazeFieldOptions:
     lambda_g : weight ``λ_g ≥ 0`` of the temporal filter ``G`` (Eq 7.14), per frame
     temporal_filter : ``"velocity"`` (``Σ‖r(t) − r(t−1)‖²``) or ``"acceleration"``
         (``Σ‖2r(t) − r(t−1) − r(t+1)‖²``), thesis footnote 3
-    membership : ``"window"`` — one membership per member and window (Eq 7.14);
-        ``"frame"`` — re-estimated at every frame (Eq 7.11)
+    membership : ``"frame"`` (default) — re-estimated at every frame (Eq 7.11);
+        ``"window"`` — one membership per member and window (Eq 7.14). In a window that
+        spans a change of groups, one membership per window gives a member's rays after
+        the change to its old charge, and every EM iteration hardens that: on the meeting
+        scene (seed 0) the worst charge error grows from 18 cm after one iteration to
+        1.06 m at convergence, while per-frame memberships stay at 6–14 cm
     max_angle : radians in ``(0, π/2)``; rays further than this from a charge (or with it
         behind them) add a constant to the M-step cost instead of ``d = ∞``
     min_window : count runs shorter than this many frames are merged into a neighbour
     max_iter, tol : EM cap and convergence tolerance (metres, and relative for ``κ``)
     inner_iterations : M-step iterations per EM iteration
     seed : seed of the charge finder's random seeds (``n_charges=None``)
-    charge_options : keyword arguments for :func:`socialcam.find_charges_sequence`
+    charge_options : keyword arguments for :func:`socialcam.find_charges_sequence`; the
+        EM starts from modes of the saliency field, so ``membership`` defaults to
+        ``"strongest"`` here (the ``"partition"`` rule pairs stray rays with members of
+        groups, which costs the field 10° of cross-validated gaze error when two members
+        look at random)
     """
 
     kappa: float | None = None
     kappa_init: float | None = None
     lambda_g: float = 1.0
     temporal_filter: Literal["velocity", "acceleration"] = "velocity"
-    membership: Literal["window", "frame"] = "window"
+    membership: Literal["window", "frame"] = "frame"
     max_angle: float = float(np.pi / 6)
     min_window: int = 3
     max_iter: int = 200
@@ -620,6 +628,7 @@ def _charges_from_chapter6(
     parts = flat.to_frames()
     idx = [k for k, (p, _, _, _) in enumerate(parts) if len(p)]
     rays = [GazeRays(*parts[k]) for k in idx]
+    options = {"membership": "strongest", **options}
     found = find_charges_sequence(rays, seed, **options) if idx else []
     counts = np.zeros(flat.n_frames, dtype=np.int64)
     cmax = max((len(c) for c in found), default=0)

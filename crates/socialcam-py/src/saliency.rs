@@ -113,6 +113,8 @@ pub struct PyChargeOptions {
     #[pyo3(attribute)]
     charge_penalty: f64,
     #[pyo3(attribute)]
+    unattended: f64,
+    #[pyo3(attribute)]
     min_magnitude: f64,
     #[pyo3(attribute)]
     bounds: Option<([f64; 3], [f64; 3])>,
@@ -125,12 +127,13 @@ pub struct PyChargeOptions {
 impl PyChargeOptions {
     fn to_core(&self) -> PyResult<ModeOptions> {
         let membership = match self.membership.as_str() {
+            "partition" => Membership::Partition,
             "cover" => Membership::Cover,
             "strongest" => Membership::Strongest,
             "all" => Membership::All,
             other => {
                 return Err(PyValueError::new_err(format!(
-                    "membership: expected 'cover', 'strongest' or 'all', got {other:?}"
+                    "membership: expected 'partition', 'cover', 'strongest' or 'all', got {other:?}"
                 )))
             }
         };
@@ -147,6 +150,7 @@ impl PyChargeOptions {
             min_members: self.min_members,
             membership,
             charge_penalty: self.charge_penalty,
+            unattended: self.unattended,
             min_magnitude: self.min_magnitude,
             bounds: self
                 .bounds

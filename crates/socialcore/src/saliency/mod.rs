@@ -31,6 +31,7 @@
 
 pub mod field;
 pub mod modes;
+mod partition;
 pub mod tracking;
 
 pub use field::{ray_density, ray_hessian, saliency, saliency_at, saliency_grid, Grid};

@@ -43,6 +43,9 @@ pub struct ModeOptions {
     /// log-likelihood `½‖d/h‖²`. A candidate is kept only if the rays it explains fit it
     /// better, in total, than this price (plus what they would cost elsewhere).
     pub charge_penalty: f64,
+    /// [`Membership::Partition`] only: the prior probability that a ray attends no charge
+    /// (it then points anywhere). A ray joins a charge when that is likelier than this.
+    pub unattended: f64,
     /// Also start one climb at the near-intersection of every pair of rays that pass
     /// within `member_sigma` bandwidths of each other (Sec 6.2 samples seeds along the
     /// rays only; with narrow bandwidths the stratified seeds then often miss a mode's
@@ -71,8 +74,9 @@ impl Default for ModeOptions {
             merge_radius: 0.2,
             member_sigma: 2.5,
             min_members: 2,
-            membership: Membership::Strongest,
+            membership: Membership::Partition,
             charge_penalty: 2.0,
+            unattended: 0.05,
             pair_seeds: true,
             min_magnitude: 0.0,
             bounds: None,
@@ -131,6 +135,12 @@ impl ModeOptions {
                 format!("{} must be finite and ≥ 0", self.charge_penalty),
             );
         }
+        if !(self.unattended > 0.0 && self.unattended < 1.0) {
+            return bad(
+                "unattended",
+                format!("{} must lie in (0, 1)", self.unattended),
+            );
+        }
         if !self.min_magnitude.is_finite() {
             return bad("min_magnitude", "must be finite".into());
         }
@@ -165,14 +175,14 @@ pub enum Membership {
     /// `member_sigma` bandwidths is a charge, and a ray may belong to several. Crossings of
     /// rays of different groups, and the several modes a noisy group can make, all count.
     All,
-    /// Winner-take-all, strongest first (the default): a ray belongs only to the strongest
+    /// Winner-take-all, strongest first: a ray belongs only to the strongest
     /// charge it is within `member_sigma` of; `min_members` applies to the rays still
     /// free. This rejects most crossings of rays of different groups behind their targets,
     /// but drops real charges whose rays pass near a stronger one (wide bandwidths) or that
     /// such a crossing outbids.
     Strongest,
     /// A set cover (experimental; on the held-out marker scenes it splits noisy groups
-    /// into sub-modes more often than `Strongest`, see the issue-13 note): choose the set of candidate modes that best explains
+    /// into sub-modes more often than `Strongest`): choose the set of candidate modes that best explains
     /// the rays. Every ray belongs to the candidate it fits best (smallest `‖d/h‖`), if it
     /// is within `member_sigma` of one; the score is
     /// `−½ Σ‖d/h‖² (members) − ½ member_sigma² (rays left out) − charge_penalty · #charges`,
@@ -182,6 +192,14 @@ pub enum Membership {
     /// of its own members' field (Eq 6.7 on the members only), so that other groups' rays
     /// passing nearby do not pull it.
     Cover,
+    /// A partition of the rays (the default; see the `partition` module): every ray
+    /// belongs to at most one charge, by likelihood under each charge's perspective-
+    /// distance kernel (Eq 6.2); each charge sits at the least-squares intersection of its
+    /// members (weights `1/(s²h²)`), not at a mode of the field; the set of charges is the
+    /// one whose likelihood under the gaze model (Sec 3.1), minus an Occam cost per charge
+    /// that scales with the bandwidths and distances, is highest. Candidates are the
+    /// mean-shift modes (Eq 6.7) with `min_members` rays within `member_sigma`.
+    Partition,
 }
 
 /// An ellipsoid `{x : Σₖ ((x − c)ᵀaₖ / rₖ)² ≤ 1}` with unit axes `aₖ` (columns of
@@ -204,7 +222,8 @@ impl Ellipsoid {
 /// One social charge of a frame.
 #[derive(Debug, Clone, PartialEq)]
 pub struct Charge {
-    /// The mode of the saliency field (metres).
+    /// The mode of the saliency field (metres); with [`Membership::Partition`] the
+    /// intersection of the member rays (see [`Membership::Partition`]).
     pub position: Vector3<f64>,
     /// The field value there, `f(x)` of Eq 6.4: the charge's strength.
     pub magnitude: f64,
@@ -673,6 +692,15 @@ fn charges_of_frame(
             kept
         }
         Membership::Cover => cover(rays, candidates, opts)?,
+        Membership::Partition => {
+            let mut kept = super::partition::partition(rays, candidates, opts)?;
+            kept.sort_by(|a, b| {
+                b.magnitude
+                    .total_cmp(&a.magnitude)
+                    .then_with(|| a.position.x.total_cmp(&b.position.x))
+            });
+            kept
+        }
     };
     for c in charges.iter_mut() {
         c.region = confidence_region(rays, &c.position, c.magnitude, opts);
@@ -712,7 +740,7 @@ fn pair_seeds(rays: &GazeRays, opts: &ModeOptions) -> Vec<Vector3<f64>> {
 }
 
 /// `‖d/h‖²` of ray `i` at `x` (Eq 6.2), infinite behind the eye.
-fn q_of(rays: &GazeRays, i: usize, x: &Vector3<f64>) -> f64 {
+pub(super) fn q_of(rays: &GazeRays, i: usize, x: &Vector3<f64>) -> f64 {
     match crate::geometry::perspective_distance(&rays.p[i], &rays.v[i], x) {
         Some(d) => d.norm_squared() * rays.inv_h2[i],
         None => f64::INFINITY,
@@ -814,14 +842,7 @@ fn cover(rays: &GazeRays, candidates: Vec<Charge>, opts: &ModeOptions) -> Result
         if own.converged {
             ch.position = own.x;
         }
-        ch.magnitude = saliency(rays, &ch.position);
-        let fi: Vec<f64> = (0..n)
-            .map(|i| super::field::ray_density(rays, i, &ch.position))
-            .collect();
-        let norm = fi.iter().map(|f| f * f).sum::<f64>().sqrt();
-        if norm > 0.0 {
-            ch.membership = fi.iter().map(|f| f / norm).collect();
-        }
+        refresh_field_terms(rays, &mut ch);
         kept.push(ch);
     }
     kept.sort_by(|a, b| {
@@ -830,6 +851,18 @@ fn cover(rays: &GazeRays, candidates: Vec<Charge>, opts: &ModeOptions) -> Result
             .then_with(|| a.position.x.total_cmp(&b.position.x))
     });
     Ok(kept)
+}
+
+/// Recomputes a moved charge's magnitude (the field there) and membership feature (Eq 6.8).
+pub(super) fn refresh_field_terms(rays: &GazeRays, ch: &mut Charge) {
+    ch.magnitude = saliency(rays, &ch.position);
+    let fi: Vec<f64> = (0..rays.len())
+        .map(|i| super::field::ray_density(rays, i, &ch.position))
+        .collect();
+    let norm = fi.iter().map(|f| f * f).sum::<f64>().sqrt();
+    if norm > 0.0 {
+        ch.membership = fi.iter().map(|f| f / norm).collect();
+    }
 }
 
 /// The social charges of one frame (Sec 6.1.2): mean-shift (Eq 6.7) from seeds along every
@@ -987,16 +1020,9 @@ mod tests {
         assert_eq!(find_charges(&rays, &o, 3).unwrap().len(), 2);
     }
 
-    #[test]
-    fn cover_keeps_both_pairs_that_a_crossing_would_split() {
-        // Pairs A = {a, a'} and B = {b, b'} meet exactly at their targets; a and b also
-        // cross exactly at X, behind both targets. Three exact two-ray modes of equal
-        // strength: the thesis' rule keeps all three, the set cover keeps A and B.
-        let (ta, tb, x) = (
-            Vector3::new(0.0, 0.0, 1.0),
-            Vector3::new(3.0, -1.0, 1.0),
-            Vector3::new(3.0, 0.0, 1.0),
-        );
+    /// Pairs A = {a, a'} and B = {b, b'} meeting exactly at `ta` = (0, 0, 1) and `tb` =
+    /// (3, −1, 1); a and b also cross exactly at X = (3, 0, 1), behind both targets.
+    fn two_pairs_and_a_crossing(ta: Vector3<f64>, tb: Vector3<f64>) -> GazeRays {
         let p = vec![
             Vector3::new(-4.0, 0.0, 1.0), // a: through A, on to X
             Vector3::new(0.0, -3.0, 1.0), // a'
@@ -1009,7 +1035,20 @@ mod tests {
             (tb - p[2]).normalize(),
             (tb - p[3]).normalize(),
         ];
-        let rays = GazeRays::new(p, v, vec![0.02; 4], None).unwrap();
+        GazeRays::new(p, v, vec![0.02; 4], None).unwrap()
+    }
+
+    #[test]
+    fn cover_keeps_both_pairs_that_a_crossing_would_split() {
+        // Pairs A = {a, a'} and B = {b, b'} meet exactly at their targets; a and b also
+        // cross exactly at X, behind both targets. Three exact two-ray modes of equal
+        // strength: the thesis' rule keeps all three, the set cover keeps A and B.
+        let (ta, tb, x) = (
+            Vector3::new(0.0, 0.0, 1.0),
+            Vector3::new(3.0, -1.0, 1.0),
+            Vector3::new(3.0, 0.0, 1.0),
+        );
+        let rays = two_pairs_and_a_crossing(ta, tb);
         let all = ModeOptions {
             membership: Membership::All,
             ..Default::default()
@@ -1033,6 +1072,53 @@ mod tests {
             .unwrap();
         assert_eq!(ca.members, vec![0, 1]);
         assert_eq!(cb.members, vec![2, 3]);
+    }
+
+    #[test]
+    fn partition_keeps_both_pairs_and_places_them_at_their_intersections() {
+        // Same three exact two-ray modes as above: the partition keeps A and B.
+        let (ta, tb) = (Vector3::new(0.0, 0.0, 1.0), Vector3::new(3.0, -1.0, 1.0));
+        let rays = two_pairs_and_a_crossing(ta, tb);
+        let charges = find_charges(&rays, &ModeOptions::default(), 1).unwrap();
+        assert_eq!(charges.len(), 2, "{charges:?}");
+        let ca = charges.iter().find(|c| c.members == vec![0, 1]).unwrap();
+        let cb = charges.iter().find(|c| c.members == vec![2, 3]).unwrap();
+        assert!((ca.position - ta).norm() < 1e-9, "{:?}", ca.position);
+        assert!((cb.position - tb).norm() < 1e-9, "{:?}", cb.position);
+    }
+
+    #[test]
+    fn partition_keeps_a_near_ray_that_pins_a_wide_pair() {
+        // Two rays from 6 m meet at the target at a shallow angle; a third person 1.2 m
+        // away looks at it too. All three rays miss by fixed small angles. The partition
+        // puts all three in one charge, at their weighted intersection, and does not
+        // leave the near ray out (which would move the charge along the pair's rays).
+        let t = Vector3::new(0.0, 0.0, 1.2);
+        let p = vec![
+            Vector3::new(-6.0, 0.4, 1.6),
+            Vector3::new(-5.9, -0.6, 1.7),
+            Vector3::new(0.8, 0.9, 1.6),
+        ];
+        let turn = [0.01, -0.012, 0.015];
+        let v: Vec<Vector3<f64>> = p
+            .iter()
+            .zip(turn)
+            .map(|(p, a)| {
+                let d = (t - p).normalize();
+                (d + d.cross(&Vector3::z()).normalize() * a).normalize()
+            })
+            .collect();
+        let rays = GazeRays::new(p, v, vec![0.05; 3], None).unwrap();
+        let charges = find_charges(&rays, &ModeOptions::default(), 2).unwrap();
+        assert_eq!(charges.len(), 1, "{charges:?}");
+        assert_eq!(charges[0].members, vec![0, 1, 2]);
+        let x = super::super::partition::intersection(&rays, &[0, 1, 2], &t).unwrap();
+        assert!((charges[0].position - x).norm() < 1e-6);
+        assert!(
+            (charges[0].position - t).norm() < 0.05,
+            "{:?}",
+            charges[0].position
+        );
     }
 
     #[test]
