@@ -394,3 +394,20 @@ def test_em_does_not_get_worse_in_windows_that_span_group_changes():
           f"converged: mean {full.mean():.3f} max {full.max():.3f} m")  # fmt: skip
     assert full.mean() <= 1.1 * one.mean()
     assert full.max() < 0.3
+
+
+def test_init_array_with_frames_of_another_count_in_a_window():
+    """Short runs of another charge count are merged into a window (gaze_split_windows):
+    an init array taken from per-frame charges then has frames with fewer or more
+    positions than their window — they start from their neighbours instead of failing."""
+    from socialcam.gazefield import _fill_window_init
+
+    start = np.full((6, 2, 3), np.nan)
+    start[:, 0] = np.arange(6)[:, None]
+    start[2, 0] = np.nan  # a frame without charges
+    start[4, 1] = 9.0  # a frame with two
+    out = _fill_window_init(start, np.array([[0, 6, 1]]))
+    assert np.isfinite(out[:, 0]).all() and np.isnan(out[:, 1]).all()
+    assert out[2, 0, 0] in (1.0, 3.0)  # the nearest frame with a position
+    with pytest.raises(ValueError, match="init"):
+        _fill_window_init(np.full((3, 1, 3), np.nan), np.array([[0, 3, 1]]))

@@ -400,6 +400,7 @@ class GazeField:
             start = as_float_array(init, "init", (n_frames, None, 3), allow_nan=True)
             if start.shape[1] < imax:
                 raise ValueError(f"init: needs room for {imax} charges per frame")
+            start = _fill_window_init(start, windows)
 
         people, dense = np.unique(flat.ids, return_inverse=True)
         (pos, mag, kap_w, memb, _resp, ll, iters, conv) = _core.gaze_em(
@@ -973,3 +974,26 @@ def fuse_gaze(
 def plot_gaze_field(field: GazeField, t: float | None = None, **kwargs: Any) -> Any:
     """Plots ``field`` on a horizontal slice; see :meth:`GazeField.plot`."""
     return field.plot(t, **kwargs)
+
+
+def _fill_window_init(start: FloatArray, windows: npt.NDArray[np.int64]) -> FloatArray:
+    """A window of ``n`` charges may hold frames that had another count (short runs are
+    merged into their neighbours, ``gaze_split_windows``): a frame with fewer starts from the
+    nearest frame of its window that has all ``n`` positions, one with more keeps its first
+    ``n``."""
+    start = np.array(start, dtype=np.float64)
+    for a, b, n in windows:
+        start[a:b, n:] = np.nan  # a frame with more charges than its window keeps n
+        if n == 0:
+            continue
+        ok = np.isfinite(start[a:b, :n]).all(axis=(1, 2))
+        if ok.all():
+            continue
+        good = np.flatnonzero(ok)
+        if len(good) == 0:
+            raise ValueError(
+                f"init: no frame of frames {a}..{b - 1} has the window's {n} charge positions"
+            )
+        for k in np.flatnonzero(~ok):
+            start[a + k, :n] = start[a + good[np.argmin(np.abs(good - k))], :n]
+    return start
