@@ -233,25 +233,28 @@ fn eigenvalue_root_bound(p: &BqpProblem) -> f64 {
     }
     let lam = w.clone().symmetric_eigenvalues().min();
     let s = 1e-9 - lam;
-    let mut qs = Vec::with_capacity(n * n);
-    for i in 0..n {
-        for j in 0..n {
-            qs.push(if i == j { s } else { w[(i, j)] });
-        }
-    }
     let model = Model {
         n,
         w: w.transpose().as_slice().to_vec(),
-        lin: h.iter().map(|v| v - s).collect(),
         h,
-        qs,
+        s: vec![s; n],
+        adj: vec![Vec::new(); n],
+        margin: 0.0,
+        node_sdp: false,
         qdiag: vec![0.0; n],
         integral: true,
     };
     let clock = Clock::new(None);
     let mut solver = boxqp::BoxQp::new(n);
     solver
-        .solve(&model, &vec![FREE; n], &vec![0.5; n], f64::INFINITY, &clock)
+        .solve(
+            &model,
+            &model.s,
+            &vec![FREE; n],
+            &vec![0.5; n],
+            f64::INFINITY,
+            &clock,
+        )
         .bound
 }
 
@@ -327,5 +330,37 @@ fn rejects_bad_options() {
             solve_bqp(&p, &opts),
             Err(Error::InvalidInput { .. })
         ));
+    }
+}
+
+/// Diagnostic (not run by default): root bound, optimum and node counts on Beasley n = 100.
+/// `BQP_PROBE="n seeds nodelimit"`.
+#[test]
+#[ignore]
+fn probe_beasley() {
+    let spec = std::env::var("BQP_PROBE").unwrap_or_else(|_| "100 3 20000".into());
+    let v: Vec<u64> = spec
+        .split_whitespace()
+        .map(|s| s.parse().unwrap())
+        .collect();
+    for seed in 0..v[1] {
+        let p = beasley(v[0] as usize, 0.1, seed);
+        let t = std::time::Instant::now();
+        let opts = BqpOptions {
+            node_limit: Some(v[2]),
+            parallel: false,
+            ..BqpOptions::default()
+        };
+        let sol = solve_bqp(&p, &opts).expect("solves");
+        eprintln!(
+            "n {} seed {seed}: obj {} root {:.1} bound {:.1} opt {} nodes {} {:.2}s",
+            v[0],
+            sol.objective,
+            sol.root_bound,
+            sol.bound,
+            sol.optimal,
+            sol.nodes,
+            t.elapsed().as_secs_f64()
+        );
     }
 }
