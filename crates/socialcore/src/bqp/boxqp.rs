@@ -1,5 +1,6 @@
-//! The node relaxation: `min φ(x) = xᵀ Qs x + linᵀ x` over the box `0 ≤ x ≤ 1` with some
-//! coordinates fixed, `Qs` positive definite. Projected Newton (Bertsekas 1982) on the free
+//! The node relaxation: `min φ(x) = xᵀ(W + diag(s))x + (h − s)ᵀx` over the box
+//! `0 ≤ x ≤ 1` with some coordinates fixed, for the node's shift `s` (`W_FF + diag(s_F)`
+//! positive definite on the free set `F`). Projected Newton (Bertsekas 1982) on the free
 //! coordinates, warm-started; the returned bound is the Frank–Wolfe bound, valid at any
 //! feasible point because `φ` is convex.
 

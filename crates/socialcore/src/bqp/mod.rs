@@ -9,9 +9,14 @@
 //!   dual multipliers, i.e. the QCR shift of Billionnet and Elloumi, repaired to positive
 //!   definiteness with the smallest eigenvalue; with it the root relaxation attains the SDP
 //!   bound. The problem's own diagonal (positive semidefinite articulated programs) is kept
-//!   when better, and a projected ascent polishes the shift ([`shift`]). Each node solves the
-//!   convex relaxation of the shifted problem over its box by projected Newton, warm-started
-//!   from its parent; the bound is the Frank–Wolfe bound `φ(x) + Σ_i min(−g_i x_i,
+//!   when better (tried first: when it already closes the root the SDP is skipped), and a
+//!   projected ascent polishes the shift ([`shift`]). When the SDP shift won at the root,
+//!   every node recomputes it from the SDP of its own subproblem (fixed variables
+//!   substituted; mixing sweeps warm-started from the worker's last factor, repaired to
+//!   positive definiteness by trial Cholesky factorisations): the node bound is then the
+//!   node's SDP bound rather than the root shift's, which cut the nodes on Beasley n = 100
+//!   instances 5–50×. Each node solves the convex relaxation of its shifted problem over
+//!   its box by projected Newton, warm-started from its parent; the bound is the Frank–Wolfe bound `φ(x) + Σ_i min(−g_i x_i,
 //!   g_i (1 − x_i))`, valid at any feasible `x`, so an inexact solve never gives an invalid
 //!   bound.
 //! * **Variable fixing**: first-order dominance (a persistency argument: a variable whose
