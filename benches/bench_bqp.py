@@ -12,6 +12,7 @@ uniform in [−100, 100], seeds 0, 1, …). Beasley *maximises* ``xᵀSx``; ever
 minimises ``xᵀQx`` with ``Q = −S``, so the minima printed are the negated maxima.
 
 Run: python benches/bench_bqp.py [--cap SECONDS] [--n100 10] [--n150 3] [--no-highs]
+[--no-scip] [--serial]. "cpu s" is the process CPU time of our solve (all threads).
 """
 
 from __future__ import annotations
@@ -186,6 +187,7 @@ def main() -> None:
     ap.add_argument("--n100", type=int, default=10, help="Beasley n = 100 instances")
     ap.add_argument("--n150", type=int, default=3, help="Beasley n = 150 instances")
     ap.add_argument("--no-highs", action="store_true")
+    ap.add_argument("--no-scip", action="store_true")
     ap.add_argument("--no-articulated", action="store_true")
     ap.add_argument("--serial", action="store_true", help="our tree search on one thread")
     args = ap.parse_args()
@@ -201,18 +203,23 @@ def main() -> None:
         for seed in range(count):
             inst.append((f"beasley{n}-s{seed}", beasley(n, seed), np.zeros(n)))
     print(
-        f"{'instance':22s} {'n':>4s} {'ours s':>8s} {'opt':>4s} {'nodes':>7s} "
+        f"{'instance':22s} {'n':>4s} {'ours s':>8s} {'cpu s':>8s} {'opt':>4s} {'nodes':>7s} "
         f"{'Gurobi s':>8s} {'opt':>4s} {'SCIP s':>8s} {'opt':>4s} {'HiGHS s':>8s} {'opt':>4s} "
-        f"{'grb/ours':>8s} agree",
+        f"{'grb/ours':>8s} {'grb cpu':>8s} {'cpu rat':>8s} agree",
         flush=True,
     )
     totals: dict[str, list[float]] = {}
     for name, Q, c in inst:
-        t = time.perf_counter()
+        t, cpu = time.perf_counter(), time.process_time()
         r = sc.solve_bqp(Q, c, time_limit=args.cap, parallel=not args.serial)
-        ours = time.perf_counter() - t
+        ours, cpu = time.perf_counter() - t, time.process_time() - cpu
+        gcpu = time.process_time()
         go, gt, gok = solve_gurobi(Q, c, args.cap)
-        so, st, sok = solve_scip(Q, c, args.cap)
+        gcpu = time.process_time() - gcpu
+        if args.no_scip:
+            so, st, sok = float("nan"), float("nan"), False
+        else:
+            so, st, sok = solve_scip(Q, c, args.cap)
         if args.no_highs or len(c) > 100:
             ho, ht, hok = float("nan"), float("nan"), False
         else:
@@ -224,22 +231,25 @@ def main() -> None:
             if not np.isnan(v)
         )
         print(
-            f"{name:22s} {len(c):4d} {ours:8.3f} {r.optimal!s:>4.4s} {r.nodes:7d} "
+            f"{name:22s} {len(c):4d} {ours:8.3f} {cpu:8.3f} {r.optimal!s:>4.4s} {r.nodes:7d} "
             f"{gt:8.3f} {gok!s:>4.4s} {st:8.3f} {sok!s:>4.4s} {ht:8.3f} {hok!s:>4.4s} "
-            f"{gt / ours:8.2f} {agree}",
+            f"{gt / ours:8.2f} {gcpu:8.3f} {gcpu / max(cpu, 1e-9):8.2f} {agree}",
             flush=True,
         )
         fam = name.split("-")[0]
-        tot = totals.setdefault(fam, [0.0, 0.0, 0.0, 0.0])
+        tot = totals.setdefault(fam, [0.0, 0.0, 0.0, 0.0, 0.0, 0.0])
         tot[0] += ours
         tot[1] += gt
         tot[2] += float(r.optimal)
         tot[3] += float(gok)
-    print("totals per family (seconds; proven counts):")
-    for fam, (o, g, po, pg) in totals.items():
+        tot[4] += cpu
+        tot[5] += gcpu
+    print("totals per family (seconds; proven counts; CPU seconds, load-independent):")
+    for fam, (o, g, po, pg, oc, gc) in totals.items():
         print(
             f"  {fam:12s} ours {o:8.2f} s ({po:.0f} proven)  Gurobi {g:8.2f} s ({pg:.0f} proven)"
-            f"  Gurobi/ours {g / o:6.2f}"
+            f"  Gurobi/ours {g / o:6.2f}  CPU ours {oc:7.2f} Gurobi {gc:7.2f}"
+            f"  ratio {gc / max(oc, 1e-9):6.2f}"
         )
 
 

@@ -1,5 +1,6 @@
-//! The node relaxation: `min φ(x) = xᵀ Qs x + linᵀ x` over the box `0 ≤ x ≤ 1` with some
-//! coordinates fixed, `Qs` positive definite. Projected Newton (Bertsekas 1982) on the free
+//! The node relaxation: `min φ(x) = xᵀ(W + diag(s))x + (h − s)ᵀx` over the box
+//! `0 ≤ x ≤ 1` with some coordinates fixed, for the node's shift `s` (`W_FF + diag(s_F)`
+//! positive definite on the free set `F`). Projected Newton (Bertsekas 1982) on the free
 //! coordinates, warm-started; the returned bound is the Frank–Wolfe bound, valid at any
 //! feasible point because `φ` is convex.
 
@@ -55,6 +56,7 @@ impl BoxQp {
     pub fn solve(
         &mut self,
         model: &Model,
+        s: &[f64],
         fix: &[i8],
         x0: &[f64],
         cut: f64,
@@ -66,19 +68,20 @@ impl BoxQp {
         let m = self.free.len();
         // Constant and linear term of the reduced problem.
         let mut constant = 0.0;
+        // The shift of a fixed variable adds `s_i (x_i² − x_i) = 0`: only W and h matter.
         for i in 0..n {
             if fix[i] == 1 {
-                constant += model.lin[i];
+                constant += model.h[i];
                 for j in 0..n {
                     if fix[j] == 1 {
-                        constant += model.qs[i * n + j];
+                        constant += model.w[i * n + j];
                     }
                 }
             }
         }
         for (a, &i) in self.free.iter().enumerate() {
-            let row = &model.qs[i * n..(i + 1) * n];
-            let mut p = model.lin[i];
+            let row = &model.w[i * n..(i + 1) * n];
+            let mut p = model.h[i] - s[i];
             for j in 0..n {
                 if fix[j] == 1 {
                     p += 2.0 * row[j];
@@ -88,6 +91,7 @@ impl BoxQp {
             for (b, &j) in self.free.iter().enumerate() {
                 self.a[a * m + b] = row[j];
             }
+            self.a[a * m + a] = s[i];
             self.y[a] = x0[i].clamp(0.0, 1.0);
         }
 
@@ -189,14 +193,15 @@ impl BoxQp {
         for (a, &i) in self.free.iter().enumerate() {
             x[i] = self.y[a];
         }
-        let mut grad = model.lin.clone();
+        // ∇φ_i = h_i − s_i + 2 (W x)_i + 2 s_i x_i.
+        let mut grad = model.h.clone();
         for i in 0..n {
-            let row = &model.qs[i * n..(i + 1) * n];
-            let mut s = 0.0;
+            let row = &model.w[i * n..(i + 1) * n];
+            let mut acc = 0.0;
             for j in 0..n {
-                s += row[j] * x[j];
+                acc += row[j] * x[j];
             }
-            grad[i] += 2.0 * s;
+            grad[i] += 2.0 * acc + s[i] * (2.0 * x[i] - 1.0);
         }
         Relaxation {
             x,

@@ -16,116 +16,160 @@
 //! with its smallest eigenvalue; the box relaxation of the shifted problem is then a valid
 //! bound at least as strong as the dual objective at the repaired `y`.
 
-use super::{Clock, Model};
+use super::{Clock, Model, FREE};
 use rand::{Rng, SeedableRng};
 use rand_chacha::ChaCha8Rng;
 
-/// Result of the low-rank SDP solve.
-pub(crate) struct Sdp {
-    /// QCR shift `s` (length `n`), before positive-definite repair.
-    pub s: Vec<f64>,
-    /// Sweeps done.
-    pub sweeps: usize,
+/// Low-rank factor `V` of the SDP of a node (rows `0..n` the variables, row `n` the
+/// homogenising `z₀`), kept between solves as a warm start; fixed variables' rows are
+/// ignored and folded into the linear row.
+pub(crate) struct Mixing {
+    k: usize,
+    v: Vec<f64>,
+    g: Vec<f64>,
+    /// `C_0i` of the current node (zero for fixed `i`).
+    lin: Vec<f64>,
+    /// `|g_i|` at the last sweep.
+    gnorm: Vec<f64>,
 }
 
-/// Mixing-method sweeps on the SDP of `model`, at most `max_sweeps` and until the objective
-/// changes by less than `tol` relatively over a sweep, or the clock runs out (then the
-/// current estimate is returned; it is still a usable shift after repair).
-pub(crate) fn qcr_shift(model: &Model, clock: &Clock, max_sweeps: usize, tol: f64) -> Sdp {
-    let n = model.n;
-    let m = n + 1;
-    // C as sparse rows (the Beasley instances are 10 % dense; dense ones lose little).
-    let mut row_start = Vec::with_capacity(m + 1);
-    let mut cols: Vec<usize> = Vec::new();
-    let mut vals: Vec<f64> = Vec::new();
-    let lin: Vec<f64> = (0..n)
-        .map(|i| 0.25 * (model.h[i] + model.w[i * n..(i + 1) * n].iter().sum::<f64>()))
-        .collect();
-    row_start.push(0);
-    for (j, &l) in lin.iter().enumerate() {
-        if l != 0.0 {
-            cols.push(j + 1);
-            vals.push(l);
-        }
-    }
-    row_start.push(cols.len());
-    for i in 0..n {
-        if lin[i] != 0.0 {
-            cols.push(0);
-            vals.push(lin[i]);
-        }
-        let row = &model.w[i * n..(i + 1) * n];
-        for (j, &v) in row.iter().enumerate() {
-            if v != 0.0 && j != i {
-                cols.push(j + 1);
-                vals.push(0.25 * v);
+impl Mixing {
+    /// Random unit rows (fixed seed), rank `⌈√(2(n+1))⌉ + 1`.
+    pub fn new(n: usize) -> Self {
+        let m = n + 1;
+        let k = ((2.0 * m as f64).sqrt().ceil() as usize + 1).min(m).max(2);
+        let mut rng = ChaCha8Rng::seed_from_u64(0x05ee_db0b);
+        let mut v = vec![0.0; m * k];
+        for r in v.chunks_mut(k) {
+            let mut norm = 0.0f64;
+            for x in r.iter_mut() {
+                *x = rng.random_range(-1.0..1.0);
+                norm += *x * *x;
+            }
+            let norm = norm.sqrt().max(1e-300);
+            for x in r.iter_mut() {
+                *x /= norm;
             }
         }
-        row_start.push(cols.len());
-    }
-    let k = ((2.0 * m as f64).sqrt().ceil() as usize + 1).min(m).max(2);
-    let mut rng = ChaCha8Rng::seed_from_u64(0x05ee_db0b);
-    let mut v = vec![0.0; m * k];
-    for i in 0..m {
-        let r = &mut v[i * k..(i + 1) * k];
-        let mut norm = 0.0f64;
-        for x in r.iter_mut() {
-            *x = rng.random_range(-1.0..1.0);
-            norm += *x * *x;
-        }
-        let norm = norm.sqrt().max(1e-300);
-        for x in r.iter_mut() {
-            *x /= norm;
+        Mixing {
+            k,
+            v,
+            g: vec![0.0; k],
+            lin: vec![0.0; n],
+            gnorm: vec![0.0; m],
         }
     }
-    let mut g = vec![0.0; k];
-    let mut gnorm = vec![0.0; m];
-    let mut prev = f64::INFINITY;
-    let mut sweeps = 0;
-    while sweeps < max_sweeps {
-        sweeps += 1;
-        let mut obj = 0.0;
-        for i in 0..m {
-            g.fill(0.0);
-            for p in row_start[i]..row_start[i + 1] {
-                let (j, c) = (cols[p], vals[p]);
-                let vj = &v[j * k..(j + 1) * k];
-                for (ga, va) in g.iter_mut().zip(vj) {
-                    *ga += c * va;
+
+    /// `g = Σ_j C_ij v_j` for the free row `i` (or the homogenising row `i = n`).
+    fn row_gradient(&mut self, model: &Model, fix: &[i8], i: usize) -> f64 {
+        let (n, k) = (model.n, self.k);
+        self.g.fill(0.0);
+        if i == n {
+            for j in 0..n {
+                let c = self.lin[j];
+                if c != 0.0 {
+                    let vj = &self.v[j * k..(j + 1) * k];
+                    for (ga, va) in self.g.iter_mut().zip(vj) {
+                        *ga += c * va;
+                    }
                 }
             }
-            let norm = g.iter().map(|a| a * a).sum::<f64>().sqrt();
-            gnorm[i] = norm;
-            if norm > 0.0 {
-                let vi = &mut v[i * k..(i + 1) * k];
-                for (va, ga) in vi.iter_mut().zip(&g) {
-                    *va = -ga / norm;
-                }
-            }
-            // ⟨C, VVᵀ⟩ = Σ_i v_i·g_i, and v_i·g_i = −|g_i| after the update (approximately:
-            // the g_j of earlier rows are stale, which is fine for a stopping test).
-            obj -= norm;
-        }
-        if (prev - obj).abs() <= tol * obj.abs().max(1.0) {
-            break;
-        }
-        prev = obj;
-        if sweeps % 4 == 0 && clock.out() {
-            break;
-        }
-    }
-    // Final multipliers from the converged (or last) V.
-    for i in 1..m {
-        g.fill(0.0);
-        for p in row_start[i]..row_start[i + 1] {
-            let (j, c) = (cols[p], vals[p]);
-            let vj = &v[j * k..(j + 1) * k];
-            for (ga, va) in g.iter_mut().zip(vj) {
+        } else {
+            let c = self.lin[i];
+            let v0 = &self.v[n * k..(n + 1) * k];
+            for (ga, va) in self.g.iter_mut().zip(v0) {
                 *ga += c * va;
             }
+            for &(j, w) in &model.adj[i] {
+                if fix[j] == FREE {
+                    let c = 0.25 * w;
+                    let vj = &self.v[j * k..(j + 1) * k];
+                    for (ga, va) in self.g.iter_mut().zip(vj) {
+                        *ga += c * va;
+                    }
+                }
+            }
         }
-        gnorm[i] = g.iter().map(|a| a * a).sum::<f64>().sqrt();
+        self.g.iter().map(|a| a * a).sum::<f64>().sqrt()
     }
-    let s = (1..m).map(|i| 4.0 * gnorm[i]).collect();
-    Sdp { s, sweeps }
+
+    /// Mixing-method sweeps on the SDP of the node `fix` (fixed variables substituted),
+    /// from the current factor, at most `max_sweeps` and until the objective changes by
+    /// less than `tol` relatively over a sweep, or the clock runs out. Writes the QCR shift
+    /// `s_i = 4|g_i|` of the free variables into `s` (before positive-definite repair) and
+    /// returns the sweeps done.
+    pub fn solve(
+        &mut self,
+        model: &Model,
+        fix: &[i8],
+        max_sweeps: usize,
+        tol: f64,
+        clock: &Clock,
+        s: &mut [f64],
+    ) -> usize {
+        let (n, k) = (model.n, self.k);
+        for i in 0..n {
+            self.lin[i] = if fix[i] == FREE {
+                let mut acc = model.h[i];
+                for &(j, w) in &model.adj[i] {
+                    match fix[j] {
+                        FREE => acc += w,
+                        1 => acc += 2.0 * w,
+                        _ => {}
+                    }
+                }
+                0.25 * acc
+            } else {
+                0.0
+            };
+        }
+        let mut prev = f64::INFINITY;
+        let mut sweeps = 0;
+        while sweeps < max_sweeps {
+            sweeps += 1;
+            let mut obj = 0.0;
+            for i in 0..=n {
+                if i < n && fix[i] != FREE {
+                    continue;
+                }
+                let norm = self.row_gradient(model, fix, i);
+                self.gnorm[i] = norm;
+                if norm > 0.0 {
+                    let vi = &mut self.v[i * k..(i + 1) * k];
+                    for (va, ga) in vi.iter_mut().zip(&self.g) {
+                        *va = -ga / norm;
+                    }
+                }
+                // ⟨C, VVᵀ⟩ = Σ_i v_i·g_i, and v_i·g_i = −|g_i| after the update
+                // (approximately: earlier rows' g are stale; fine for a stopping test).
+                obj -= norm;
+            }
+            if (prev - obj).abs() <= tol * obj.abs().max(1.0) {
+                break;
+            }
+            prev = obj;
+            if sweeps % 4 == 0 && clock.out() {
+                break;
+            }
+        }
+        // Final multipliers from the converged (or last) V.
+        for i in 0..n {
+            s[i] = if fix[i] == FREE {
+                4.0 * self.row_gradient(model, fix, i)
+            } else {
+                0.0
+            };
+        }
+        sweeps
+    }
+}
+
+/// The QCR shift (before positive-definite repair) from mixing-method sweeps on the SDP of
+/// the whole problem from a random start (see [`Mixing::solve`]).
+pub(crate) fn qcr_shift(model: &Model, clock: &Clock, max_sweeps: usize, tol: f64) -> Vec<f64> {
+    let n = model.n;
+    let mut mix = Mixing::new(n);
+    let mut s = vec![0.0; n];
+    mix.solve(model, &vec![FREE; n], max_sweeps, tol, clock, &mut s);
+    s
 }

@@ -27,19 +27,14 @@ const SMALL: usize = 200;
 const ASCENT_STEPS: usize = 40;
 
 fn set_shift(model: &mut Model, s: &[f64]) {
-    let n = model.n;
-    model.qs.copy_from_slice(&model.w);
-    for i in 0..n {
-        model.qs[i * n + i] = s[i];
-        model.lin[i] = model.h[i] - s[i];
-    }
+    model.s.copy_from_slice(s);
 }
 
 fn root_bound(model: &Model, solver: &mut BoxQp, clock: &Clock) -> (f64, Vec<f64>) {
     let n = model.n;
     let fix = vec![FREE; n];
     let x0 = vec![0.5; n];
-    let r = solver.solve(model, &fix, &x0, f64::INFINITY, clock);
+    let r = solver.solve(model, &model.s, &fix, &x0, f64::INFINITY, clock);
     (r.bound, r.x)
 }
 
@@ -66,13 +61,12 @@ fn eig_seconds(n: usize) -> f64 {
 }
 
 /// Sets the shift of `model` (see the module docs). Returns the root bound of the chosen
-/// shift (`−∞` if the clock ran out before a root relaxation finished).
-pub(crate) fn choose_shift(model: &mut Model, clock: &Clock) -> f64 {
+/// shift (`−∞` if the clock ran out before a root relaxation finished) and whether the SDP
+/// shift won (then the nodes recompute it too). `cut` is the pruning threshold of the
+/// incumbent: a root bound reaching it ends the work early.
+pub(crate) fn choose_shift(model: &mut Model, clock: &Clock, cut: f64) -> (f64, bool) {
     let n = model.n;
-    let fro = model.w.iter().map(|v| v * v).sum::<f64>().sqrt()
-        + model.h.iter().map(|v| v * v).sum::<f64>().sqrt();
-    let scale = if fro > 0.0 { fro } else { 1.0 };
-    let margin = 1e-7 * scale;
+    let margin = model.margin;
 
     // Always-valid fallback: Gershgorin (W + diag(s) diagonally dominant).
     let gersh: Vec<f64> = (0..n)
@@ -86,7 +80,7 @@ pub(crate) fn choose_shift(model: &mut Model, clock: &Clock) -> f64 {
         .collect();
     set_shift(model, &gersh);
     if clock.remaining_secs() < 3.0 * eig_seconds(n) {
-        return f64::NEG_INFINITY;
+        return (f64::NEG_INFINITY, false);
     }
     let mut solver = BoxQp::new(n);
     let repaired = |model: &Model, mut s: Vec<f64>| -> Option<Vec<f64>> {
@@ -96,32 +90,36 @@ pub(crate) fn choose_shift(model: &mut Model, clock: &Clock) -> f64 {
         }
         Some(s)
     };
-    let mut candidates = Vec::new();
-    // Candidate A: the SDP (QCR) shift.
-    let sdp = sdp::qcr_shift(model, clock, SDP_SWEEPS, 1e-8);
-    let _ = sdp.sweeps;
-    if let Some(s) = repaired(model, sdp.s) {
-        candidates.push(s);
-    }
-    // Candidate B: the problem's own diagonal, shifted to the margin.
-    if !clock.out() {
-        if let Some(s) = repaired(model, model.qdiag.clone()) {
-            candidates.push(s);
-        }
-    }
     let mut best = f64::NEG_INFINITY;
     let mut s = gersh;
     let mut x = vec![0.5; n];
-    for cand in candidates {
-        if clock.out() {
-            break;
-        }
+    // Candidate B first: the problem's own diagonal, shifted to the margin (one eigenvalue
+    // decomposition). When its root bound already reaches `cut` the root is solved and the
+    // SDP (tens of milliseconds) is skipped.
+    if let Some(cand) = repaired(model, model.qdiag.clone()) {
         set_shift(model, &cand);
         let (b, xb) = root_bound(model, &mut solver, clock);
         if b > best {
-            best = b;
-            x = xb;
-            s = cand;
+            (best, x, s) = (b, xb, cand);
+        }
+    }
+    if best >= cut {
+        set_shift(model, &s);
+        return (best, false);
+    }
+    // Candidate A: the SDP (QCR) shift.
+    let mut sdp_won = false;
+    if !clock.out() {
+        let sdp = sdp::qcr_shift(model, clock, SDP_SWEEPS, 1e-8);
+        if let Some(cand) = repaired(model, sdp) {
+            if !clock.out() {
+                set_shift(model, &cand);
+                let (b, xb) = root_bound(model, &mut solver, clock);
+                if b > best {
+                    (best, x, s) = (b, xb, cand);
+                    sdp_won = true;
+                }
+            }
         }
     }
     set_shift(model, &s);
@@ -165,5 +163,59 @@ pub(crate) fn choose_shift(model: &mut Model, clock: &Clock) -> f64 {
         }
     }
     set_shift(model, &s);
-    best
+    (best, sdp_won)
+}
+
+/// Repairs the node shift `s` (free entries) so that `W_FF + diag(s_F)` is positive
+/// definite: a uniform raise `δ + margin`, with `δ` the smallest trial value (starting from
+/// `guess`, the worker's last one, times 0.7; ×4 on failure) for which the matrix
+/// factorises — a Cholesky costs a sixth of an eigenvalue decomposition, and the raise
+/// stays within 4× of the needed one. Falls back to the smallest eigenvalue. False if that
+/// also fails (the caller keeps its previous shift).
+pub(crate) fn repair_free(
+    model: &Model,
+    s: &mut [f64],
+    fix: &[i8],
+    guess: &mut f64,
+    chol: &mut Vec<f64>,
+) -> bool {
+    let n = model.n;
+    let margin = model.margin;
+    let free: Vec<usize> = (0..n).filter(|&i| fix[i] == FREE).collect();
+    let m = free.len();
+    chol.resize(m * m, 0.0);
+    let mut delta = (0.7 * *guess).max(margin);
+    for _ in 0..8 {
+        for (a, &i) in free.iter().enumerate() {
+            for (b, &j) in free[..=a].iter().enumerate() {
+                chol[a * m + b] = model.w[i * n + j];
+            }
+            chol[a * m + a] = s[i] + delta;
+        }
+        if cholesky_in_place(chol, m, None) {
+            *guess = delta;
+            for &i in &free {
+                s[i] += delta + margin;
+            }
+            return true;
+        }
+        delta *= 4.0;
+    }
+    let mat = nalgebra::DMatrix::from_fn(m, m, |a, b| {
+        let (i, j) = (free[a], free[b]);
+        if a == b {
+            s[i]
+        } else {
+            model.w[i * n + j]
+        }
+    });
+    let lam = mat.symmetric_eigenvalues().min();
+    if !lam.is_finite() {
+        return false;
+    }
+    *guess = (-lam).max(margin);
+    for &i in &free {
+        s[i] += margin - lam;
+    }
+    true
 }
