@@ -130,6 +130,14 @@ BQP_OPTS = dataclasses.asdict(BqpOptions(time_limit=5.0, node_limit=1000))
 ART_OPTS = dataclasses.asdict(ArticulatedOptions(k=3, time_limit=5.0, node_limit=10_000))
 
 
+# faces: the N = 5 points as the 5 landmarks of one face seen by all F cameras
+F_SLOT = np.arange(F, dtype=np.int64)
+F_LM = np.ascontiguousarray(PIX_FN2)  # (F, 5, 2)
+F_SIZE = np.full(F, 50.0)
+F_GROUP = np.zeros(F, dtype=np.int64)
+F_REST = [np.zeros(1, np.int64), np.array([0.25]), 0.1, 1.5, 0.035, 0.1]
+
+
 class Opts(dict[str, Any]):
     """An options object (attribute access), fuzzed field by field."""
 
@@ -148,6 +156,16 @@ BASE: dict[str, tuple[list[Any], dict[str, Any]]] = {
     # The ring's optical axes meet at the origin: a valid fixation segment.
     "calibrate_gaze": ([R, C, 1e-4, 100.0, 50, 1e-12], {}),
     "gaze_rays": ([R, C, np.zeros(3), np.array([0.0, 0.0, 1.0])], {}),
+    "face_associate": (
+        [K, R, C, np.zeros(F, np.int64), F_SLOT, F_LM, F_SIZE, C[:1] * 0.9, F_SLOT[:1], *F_REST],
+        {},
+    ),
+    "face_triangulate": ([K, R, C, F_SLOT, F_LM, F_SIZE * 0.02, F_GROUP], {}),
+    "face_refine_track": (
+        [K, R, C, F_GROUP, F_SLOT, F_LM, F_SIZE * 0.02, X[None].copy(), 10.0, 3],
+        {},
+    ),
+    "face_gaze": ([X[None].copy(), np.full((1, 5), 0.01)], {}),
     "reconstruct_trajectories": (
         [K, R, C, TIMES, PIX_TRAJ, Opts(TRAJ_OPTS)],
         {"keep_covariance": True, "strict": False},

@@ -296,3 +296,63 @@ def gaze_rays(
     v: npt.NDArray[np.float64],
 ) -> tuple[npt.NDArray[np.float64], npt.NDArray[np.float64]]:
     """World rays ``p_i = R_iᵀ p + C_i``, ``v_i = R_iᵀ v`` → ``(p (F,3), v (F,3))``."""
+
+# --- 3D faces (thesis Sec 3.2.2, Eq 3.2–3.4) ------------------------------------------
+
+def face_associate(
+    k: npt.NDArray[np.float64],
+    r: npt.NDArray[np.float64],
+    c: npt.NDArray[np.float64],
+    instant: npt.NDArray[np.int64],
+    slot: npt.NDArray[np.int64],
+    landmarks: npt.NDArray[np.float64],
+    size: npt.NDArray[np.float64],
+    anchor_centre: npt.NDArray[np.float64],
+    anchor_slot: npt.NDArray[np.int64],
+    anchor_instant: npt.NDArray[np.int64],
+    anchor_gate: npt.NDArray[np.float64],
+    rel_threshold: float,
+    min_threshold: float,
+    interocular_min: float,
+    interocular_max: float,
+) -> tuple[npt.NDArray[np.int64], npt.NDArray[np.int64], npt.NDArray[np.int64]]:
+    """Eq 3.2 over instants: camera slots ``K, R (M,3,3)``, ``C (M,3)`` with their
+    ``instant (M,)``; detections ``slot (N,)``, ``landmarks (N,5,2)``, ``size (N,)``; anchors
+    ``(A,3)`` (wearers' head cameras with their own ``anchor_slot``, or tracked faces with
+    slot −1) at ``anchor_instant (A,)`` with ``anchor_gate (A,)`` metres → ``group (N,)``,
+    ``group_anchor (G,)``, ``group_instant (G,)`` (−1 = none)."""
+
+def face_triangulate(
+    k: npt.NDArray[np.float64],
+    r: npt.NDArray[np.float64],
+    c: npt.NDArray[np.float64],
+    slot: npt.NDArray[np.int64],
+    landmarks: npt.NDArray[np.float64],
+    sigma: npt.NDArray[np.float64],
+    group: npt.NDArray[np.int64],
+) -> tuple[
+    npt.NDArray[np.float64],
+    npt.NDArray[np.float64],
+    npt.NDArray[np.float64],
+    npt.NDArray[np.int64],
+]:
+    """Eq 3.3 per group → ``x (G,5,3)``, ``std (G,5)`` m, ``rms (G,)`` px, ``views (G,)``."""
+
+def face_refine_track(
+    k: npt.NDArray[np.float64],
+    r: npt.NDArray[np.float64],
+    c: npt.NDArray[np.float64],
+    step: npt.NDArray[np.int64],
+    slot: npt.NDArray[np.int64],
+    landmarks: npt.NDArray[np.float64],
+    sigma: npt.NDArray[np.float64],
+    x0: npt.NDArray[np.float64],
+    lam: float,
+    iterations: int,
+) -> tuple[npt.NDArray[np.float64], npt.NDArray[np.float64]]:
+    """Eq 3.4 over one track of ``T`` instants → ``x (T,5,3)``, ``std (T,5)``."""
+
+def face_gaze(
+    x: npt.NDArray[np.float64], std: npt.NDArray[np.float64]
+) -> tuple[npt.NDArray[np.float64], npt.NDArray[np.float64], npt.NDArray[np.float64]]:
+    """Primary gaze rays of faces ``(G,5,3)`` → ``p (G,3)``, ``v (G,3)``, ``sigma (G,)``."""

@@ -10,6 +10,8 @@ use pyo3::prelude::*;
 mod bqp;
 mod convert;
 mod errors;
+// issue 11: 3D faces
+mod faces;
 // issue 10: ego-motion gaze calibration
 mod gaze;
 mod geometry;
@@ -28,5 +30,6 @@ fn _core(m: &Bound<'_, PyModule>) -> PyResult<()> {
     gazefield::register(m)?;
     bqp::register(m)?;
     gaze::register(m)?;
+    faces::register(m)?;
     Ok(())
 }

