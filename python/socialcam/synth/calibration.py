@@ -6,7 +6,7 @@ from dataclasses import dataclass
 
 import numpy as np
 import numpy.typing as npt
-from scipy.spatial.transform import Rotation
+from scipy.spatial.transform import Rotation  # type: ignore[import-untyped]
 
 from socialcam._validate import FloatArray, as_float_array, check_float, check_int, check_seed
 from socialcam.camera import Cameras
