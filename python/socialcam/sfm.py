@@ -201,7 +201,7 @@ class VideoSfmOptions:
     camera_model: VideoCameraModel = "SIMPLE_RADIAL"
     max_features: int = 2048
     sequential_overlap: int = 3
-    cross_pairs: int = 3
+    cross_pairs: int = 2
     global_mapping: bool = False
     refine_intrinsics: bool = True
     min_inliers: int = 25
