@@ -176,7 +176,7 @@ class VideoSfmOptions:
     sequential_overlap : each keyframe is matched with this many following keyframes of
         the same video.
     cross_pairs : each keyframe is matched with its ``cross_pairs`` most similar keyframes in
-        each other video (retrieval by a TF-IDF bag of SIFT words computed here; the
+        each other video (more in short clips: ``MIN_CROSS_PAIRS`` per pair of videos) (retrieval by a TF-IDF bag of SIFT words computed here; the
         vocabulary tree of COLMAP is never used).
     global_mapping : use COLMAP's global mapper instead of the incremental one.
     refine_intrinsics : with given ``intrinsics``, let bundle adjustment refine them.
@@ -624,12 +624,15 @@ def _retrieval_pairs(
     vec /= np.maximum(np.linalg.norm(vec, axis=1, keepdims=True), 1e-12)
     sim = vec @ vec.T
     video = np.array([v for v, _, _ in flat])
+    # a short clip has few keyframes: each of them gets more cross pairs, so that every
+    # pair of videos is tried on at least MIN_CROSS_PAIRS keyframe pairs each way
+    per_video = [max(cross, -(-MIN_CROSS_PAIRS // max(1, len(k)))) for k in by_video]
     for i in range(len(flat)):
         for other in range(len(by_video)):
             if other == video[i]:
                 continue
             s = np.where(video == other, sim[i], -np.inf)
-            for j in np.argsort(-s, kind="stable")[:cross]:
+            for j in np.argsort(-s, kind="stable")[: per_video[video[i]]]:
                 if np.isfinite(s[j]):
                     a, b = sorted((flat[i][2], flat[j][2]))
                     pairs.add((a, b))
@@ -1397,6 +1400,10 @@ def _pose_video(
             reasons[k] = "frame not decoded"
     return message
 
+
+#: fewest cross-video keyframe pairs tried between two videos, each way (short clips get
+#: more than ``cross_pairs`` per keyframe)
+MIN_CROSS_PAIRS = 30
 
 #: fewest keyframes per video (the keyframe interval shrinks for short clips)
 MIN_KEYFRAMES = 6
