@@ -48,6 +48,35 @@ def undistort_to_normalised(camera: Any, px: FloatArray) -> FloatArray:
     return n
 
 
+def follow(
+    prev: npt.NDArray[np.uint8],
+    cur: npt.NDArray[np.uint8],
+    pts: npt.NDArray[np.float32],
+    lk: dict[str, Any],
+    fb_px: float,
+) -> tuple[npt.NDArray[np.float32], npt.NDArray[np.bool_]]:
+    """One pyramidal Lucas–Kanade step of ``pts (N, 1, 2)`` from ``prev`` to ``cur``: the
+    new positions and which of them to keep (found both ways, back within ``fb_px``
+    pixels of where they started, inside ``cur``)."""
+    import cv2
+
+    p1, st1, _ = cv2.calcOpticalFlowPyrLK(prev, cur, pts, None, **lk)  # type: ignore[call-overload]
+    p0b, st2, _ = cv2.calcOpticalFlowPyrLK(cur, prev, p1, None, **lk)  # type: ignore[call-overload]
+    fb = np.linalg.norm((p0b - pts).reshape(-1, 2), axis=1)
+    h, w = cur.shape[:2]
+    q = p1.reshape(-1, 2)
+    ok = (
+        (st1.ravel() == 1)
+        & (st2.ravel() == 1)
+        & (fb < fb_px)
+        & (q[:, 0] >= 0)
+        & (q[:, 1] >= 0)
+        & (q[:, 0] <= w - 1)
+        & (q[:, 1] <= h - 1)
+    )
+    return p1, ok
+
+
 def track(
     start: npt.NDArray[np.uint8],
     px: FloatArray,
@@ -59,7 +88,6 @@ def track(
     """Follows the pixels ``px (N, 2)`` of map points ``X (N, 3)`` from frame ``start``
     through grey ``frames`` in order (pyramidal Lucas–Kanade with a forward–backward check of ``fb_px`` pixels); returns, per frame, the surviving pixels
     and their map points."""
-    import cv2
 
     out: list[tuple[FloatArray, FloatArray]] = []
     prev = start
@@ -71,20 +99,7 @@ def track(
             out.append((np.zeros((0, 2)), Xs))
             prev = cur
             continue
-        p1, st1, _ = cv2.calcOpticalFlowPyrLK(prev, cur, pts, None, **_LK)  # type: ignore[call-overload]
-        p0b, st2, _ = cv2.calcOpticalFlowPyrLK(cur, prev, p1, None, **_LK)  # type: ignore[call-overload]
-        fb = np.linalg.norm((p0b - pts).reshape(-1, 2), axis=1)
-        h, w = cur.shape[:2]
-        q = p1.reshape(-1, 2)
-        ok = (
-            (st1.ravel() == 1)
-            & (st2.ravel() == 1)
-            & (fb < fb_px)
-            & (q[:, 0] >= 0)
-            & (q[:, 1] >= 0)
-            & (q[:, 0] <= w - 1)
-            & (q[:, 1] <= h - 1)
-        )
+        p1, ok = follow(prev, cur, pts, _LK, fb_px)
         pts, Xs = np.ascontiguousarray(p1[ok]), Xs[ok]
         out.append((pts.reshape(-1, 2).astype(np.float64), Xs))
         prev = cur
@@ -173,33 +188,18 @@ class KeyframeSelector:
         """Whether this frame (grey, full resolution; frames in order) is a keyframe."""
         import cv2
 
-        small = cv2.pyrDown(gray)
+        small = np.asarray(cv2.pyrDown(gray), dtype=np.uint8)
         new = (
             self._prev is None
             or self._since + 1 >= self.max_step
             or small.shape != self._prev.shape
         )
-        if not new and self.min_overlap > 0:
+        if not new and self.min_overlap > 0 and self._prev is not None:
             if len(self._pts):
-                p1, st1, _ = cv2.calcOpticalFlowPyrLK(
-                    self._prev, small, self._pts, None, **self._LK
-                )  # type: ignore[call-overload]
-                p0b, st2, _ = cv2.calcOpticalFlowPyrLK(small, self._prev, p1, None, **self._LK)  # type: ignore[call-overload]
-                fb = np.linalg.norm((p0b - self._pts).reshape(-1, 2), axis=1)
-                q = p1.reshape(-1, 2)
-                h, w = small.shape[:2]
-                ok = (
-                    (st1.ravel() == 1)
-                    & (st2.ravel() == 1)
-                    & (fb < 0.5)
-                    & (q[:, 0] >= 0)
-                    & (q[:, 1] >= 0)
-                    & (q[:, 0] <= w - 1)
-                    & (q[:, 1] <= h - 1)
-                )
+                p1, ok = follow(self._prev, small, self._pts, self._LK, 0.5)
                 self._pts = np.ascontiguousarray(p1[ok])
             new = len(self._pts) < self.min_overlap * self._n0
-        self._prev = np.asarray(small, dtype=np.uint8)
+        self._prev = small
         if new:
             c = cv2.goodFeaturesToTrack(small, self.CORNERS, 0.01, self.SPACING)
             self._pts = np.zeros((0, 1, 2), np.float32) if c is None else c.astype(np.float32)
