@@ -55,7 +55,6 @@ class _World:
             C = np.array([2.8 * np.cos(ang[v]), 2.4 * np.sin(ang[v]), z])
             C = np.tile(C, (T, 1)) + 0.01 * rng.normal(size=(T, 3))
             R = look_at(C, np.array([0.0, 0.0, 1.6]))
-            R = np.diag([-1.0, -1.0, 1.0]) @ R  # upright image (look_at rolls by 180°)
             cams.append(Cameras(np.tile(K, (T, 1, 1)), R, C, np.arange(T) / 15.0))
         self.cams = cams
         pos = rng.uniform(-1.2, 1.2, (P, 2))
@@ -156,7 +155,7 @@ def test_rendered_faces_are_detected_where_the_truth_says(tmp_path):
         pl = _face_plane(eye, head)
         pl = type(pl)(pl.name, pl.origin, pl.u, pl.v, pl.size, 1 + k % 2)
         C = eye + np.array([dist, 0.0, 0.05])
-        R = np.diag([-1.0, -1.0, 1.0]) @ look_at(C[None], eye)[0]
+        R = look_at(C[None], eye)[0]
         img = r.render(R, C, r.prepare([bg]), r.prepare([pl]))
         d = detect_faces(img)
         xy = marks[k % 2]

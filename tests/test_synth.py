@@ -89,6 +89,19 @@ def test_gaze_model_offset_distribution():
     assert np.mean(r**2) == pytest.approx(2 * 0.1**2, rel=0.03)
 
 
+def test_look_at_keeps_the_world_upright_in_the_image():
+    """World up is image up (smaller row) and world left is image left: no 180° roll."""
+    C = np.array([[0.0, 0.0, 1.6]])
+    R = synth.look_at(C, np.array([3.0, 0.0, 1.6]))
+    cams = sc.Cameras(synth.intrinsics(640, 480), R, C)
+    centre = cams.project(np.array([3.0, 0.0, 1.6]))[0]
+    above = cams.project(np.array([3.0, 0.0, 2.0]))[0]
+    left = cams.project(np.array([3.0, 0.5, 1.6]))[0]  # +y is on the left when facing +x
+    assert above[1] < centre[1] - 10 and abs(above[0] - centre[0]) < 1e-6
+    assert left[0] < centre[0] - 10 and abs(left[1] - centre[1]) < 1e-6
+    np.testing.assert_allclose(np.linalg.det(R), 1.0)
+
+
 def test_people_look_at_their_targets():
     eyes = synth.wander(40, 5, seed=3, fps=10)
     targets = np.array([[0.0, 0.0, 1.0], [2.0, 1.0, 1.5]])

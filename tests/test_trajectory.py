@@ -230,12 +230,13 @@ def test_in_span_reconstruction_is_unbiased_and_fits_to_the_noise(seed):
 def test_real_mocap_markers_from_random_cameras(data_dir, seed):
     """Real data: the 41 optical markers of CMU 85_02 (first 400 frames at 120 Hz, every 4th:
     100 frames, 3.3 s) seen by random photographers with 1 px noise, K by cross validation.
-    Measured over camera seeds 24, 1, 2, 3, 4 (‖X‖ ≈ 1.7 m in lab coordinates): mean
-    relative error 0.52–0.58 %, RMS 3D error 10.3–11.6 mm, worst marker's RMS 13.9–16.5 mm,
-    mean signed error per axis at most 0.49 mm in magnitude (standard error over markers
-    0.08–0.22 mm). Thresholds: those plus a noise margin; a +5 mm bias gives ~13.5 mm RMS
-    and a 5 mm mean error, a 0.5 px principal-point shift a −2.6 mm vertical mean error, a
-    half-frame time offset on every other photo a worst marker above 21 mm."""
+    Measured over camera seeds 0–11 (‖X‖ ≈ 1.7 m in lab coordinates): mean relative error
+    0.50–0.58 %, RMS 3D error 10.3–11.9 mm, worst marker's RMS 12.7–21.3 mm (one marker's
+    noise: the widest-spread figure), mean signed error per axis at most 0.72 mm in
+    magnitude. Thresholds: those plus a noise margin; a +5 mm bias gives ~13.5 mm RMS and a
+    5 mm mean error, a 0.5 px principal-point shift a −2.6 mm vertical mean error, a
+    half-frame time offset on every other photo a relative error of 0.71–0.75 % and an RMS
+    of 14.9–16.5 mm."""
     m = load_c3d(data_dir / "mocap" / "cmu_85_02.c3d", frames=slice(0, 400, 4))
     p = m.positions @ Y_UP_TO_Z_UP.T
     X = np.transpose(p, (1, 0, 2))  # (M, F, 3), NaN where the marker was lost
@@ -257,7 +258,7 @@ def test_real_mocap_markers_from_random_cameras(data_dir, seed):
     assert np.sqrt((err[seen] ** 2).mean()) < 0.0125, np.sqrt((err[seen] ** 2).mean())
     # Per marker: each one's RMS error over the frames where it was captured.
     per_marker = np.array([np.sqrt((e[s] ** 2).mean()) for e, s in zip(err, seen, strict=True)])
-    assert per_marker.max() < 0.019, per_marker.max()
+    assert per_marker.max() < 0.025, per_marker.max()
     # Unbiased: the mean signed error per axis (over markers' means) is near zero.
     signed = np.array([dj[s].mean(axis=0) for dj, s in zip(d, seen, strict=True)])
     assert (np.abs(signed.mean(axis=0)) < 0.0012).all(), signed.mean(axis=0)

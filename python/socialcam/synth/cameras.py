@@ -25,7 +25,8 @@ def intrinsics(width: int = 1280, height: int = 720, fov_deg: float = 60.0) -> F
 
 def look_at(centres: npt.ArrayLike, targets: npt.ArrayLike, up: npt.ArrayLike = UP) -> FloatArray:
     """World→camera rotations ``(F, 3, 3)`` for cameras at ``centres (F, 3)`` looking at
-    ``targets (F, 3)`` or ``(3,)``, with image "up" towards ``up``."""
+    ``targets (F, 3)`` or ``(3,)``, with image "up" towards ``up`` (OpenCV axes: x right,
+    y down, z forward)."""
     C = as_float_array(centres, "centres", (None, 3))
     T = np.broadcast_to(as_float_array(targets, "targets"), C.shape)
     z = T - C
@@ -34,7 +35,7 @@ def look_at(centres: npt.ArrayLike, targets: npt.ArrayLike, up: npt.ArrayLike = 
         raise ValueError("targets: a camera centre coincides with its target")
     z = z / n
     up_ = np.broadcast_to(as_float_array(up, "up"), C.shape)
-    x = np.cross(z, -up_)  # image y points down, so x = y × z with y ≈ -up
+    x = np.cross(-up_, z)  # image y points down (y ≈ -up) and x = y × z points right
     bad = np.linalg.norm(x, axis=1) < 1e-9
     if bad.any():  # looking straight up or down: pick any perpendicular
         x[bad] = np.cross(z[bad], np.array([1.0, 0.0, 0.0]))

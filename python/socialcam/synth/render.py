@@ -641,20 +641,14 @@ def _camera_poses(
     times: FloatArray,
     R_cg: FloatArray,
     eye_offset: FloatArray,
-    upright: bool = False,
 ) -> tuple[FloatArray, FloatArray, FloatArray, FloatArray]:
-    """World→camera ``R (F,3,3)``, centres ``C (F,3)``, eyes and primary gaze at ``times``.
-
-    ``synth.look_at`` gives cameras whose image y axis points UP (rolled 180° about the
-    optical axis); ``upright`` rolls them back so that the world's up is the image's up
-    (needed for faces; scenes without faces keep the old cameras, unchanged)."""
+    """World→camera ``R (F,3,3)``, centres ``C (F,3)``, eyes and primary gaze at ``times``
+    (the world's up is the image's up before the head's roll)."""
     p = motion.at("eyes", times)[:, v]
     hv = motion.at("head", times)[:, v]
     hv /= np.linalg.norm(hv, axis=-1, keepdims=True)
     roll = motion.at("roll", times)[:, v]
     Rg = look_at(p, p + hv)
-    if upright:
-        Rg = np.diag([-1.0, -1.0, 1.0]) @ Rg
     c, s = np.cos(roll), np.sin(roll)
     Rz = np.zeros((len(times), 3, 3))
     Rz[:, 0, 0], Rz[:, 0, 1], Rz[:, 1, 0], Rz[:, 1, 1], Rz[:, 2, 2] = c, -s, s, c, 1.0
@@ -1189,8 +1183,7 @@ def render_scene(
     ``start_spread`` (s; default ``min(1, duration / 5)``: video starts are drawn in
     ``[0, start_spread]``); ``crf`` (x264 quality, lower = better); ``faces`` (a real face
     photograph on the front of every head, ``socialcam/data/faces``, with the 3D landmark
-    truth ``face_*`` in :class:`SceneTruth`; the head cameras are then upright — without
-    faces they keep the historical 180° roll of ``synth.look_at``); ``n_people`` (people without a camera standing
+    truth ``face_*`` in :class:`SceneTruth`); ``n_people`` (people without a camera standing
     around the wearers' loop and looking at wearers; drawn when ``bodies``).
 
     Deterministic: same arguments, same files.
@@ -1324,7 +1317,7 @@ def render_scene(
             K, _dist, Kr, maps, (rw, rh) = lenses[v]
             R_cg = _rot_from_z(primary_dir[v])
             times = frame_times[v]
-            R, C, p, hv = _camera_poses(motion, v, times, R_cg, eye_offset[v], faces)
+            R, C, p, hv = _camera_poses(motion, v, times, R_cg, eye_offset[v])
             regard = motion.at("regard", times)[:, v]
             code = motion.code_at(times)[:, v]
             if calibration:
