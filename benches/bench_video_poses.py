@@ -38,7 +38,8 @@ def _scene(root: Path, seed: int, args: argparse.Namespace):
     from socialcam.synth.render import load_truth, render_scene
 
     w, h = args.size
-    d = root / f"w{args.wearers}_d{args.duration:g}_{w}x{h}_s{seed}"
+    lens = "" if args.lens == "pinhole" else f"_{args.lens}"
+    d = root / f"w{args.wearers}_d{args.duration:g}_{w}x{h}_s{seed}{lens}"
     if (d / "truth.npz").is_file():
         truth = load_truth(d / "truth.npz")
         return [d / f"{n}.mp4" for n in truth.names], truth, 0.0
@@ -49,6 +50,7 @@ def _scene(root: Path, seed: int, args: argparse.Namespace):
         duration=args.duration,
         size=(w, h),
         seed=seed,
+        distortion=None if args.lens == "pinhole" else args.lens,
         progress=False,
     )
     return list(s.videos), s.truth, time.perf_counter() - t0
@@ -134,6 +136,8 @@ def main() -> int:
     ap.add_argument("--manual-sync", action="store_true", help="true offsets instead of audio")
     ap.add_argument("--ref-seconds", type=float, default=3.0)
     ap.add_argument("--no-reference", action="store_true")
+    ap.add_argument("--lens", choices=["pinhole", "radial", "fisheye"], default="pinhole")
+    ap.add_argument("--camera-model", default=None, help="COLMAP model (default: SIMPLE_RADIAL)")
     args = ap.parse_args()
     args.size = tuple(args.size)
     rows = []
@@ -154,6 +158,7 @@ def main() -> int:
             sync=sync,
             known_distance=_known_distance(truth),
             progress=False,
+            **({} if args.camera_model is None else {"camera_model": args.camera_model}),
         )
         wall = time.perf_counter() - t0
         cpu = time.process_time() - c0

@@ -77,3 +77,36 @@ def test_reconstruct_static_bad_input(tmp_path, data_dir):
         reconstruct_static(data_dir / "sceaux_castle_small", tmp_path / "out")
     with pytest.raises(ValueError, match="camera_mode"):
         reconstruct_static(data_dir / "sceaux_castle_small", tmp_path / "o2", camera_mode="x")  # type: ignore[arg-type]
+
+
+def test_world_up_from_head_cameras_that_look_down():
+    """Gravity from head cameras: with zero roll but a mean pitch (people look down at
+    things), the mean camera −y leans by that pitch; the x axes stay horizontal and give
+    up exactly. Few headings (x axes nearly parallel): the mean −y is the fallback."""
+    from socialcam.sfm import _camera_up
+    from socialcam.synth import look_at
+
+    rng = np.random.default_rng(4)
+    n = 200
+    yaw = rng.uniform(-1.0, 1.0, n)  # a short clip: headings within ±57°
+    pitch = np.radians(-20 + 10 * rng.normal(size=n))  # looking 20° down on average
+    d = np.c_[np.cos(pitch) * np.cos(yaw), np.cos(pitch) * np.sin(yaw), np.sin(pitch)]
+    C = rng.normal(size=(n, 3))
+    R = look_at(C, C + d)
+    # the same cameras in a world whose up is tilted: R' = R Gᵀ for a world rotation G
+    ax = np.array([1.0, 2.0, 0.0]) / np.sqrt(5.0)
+    th = np.radians(30)
+    K = np.array([[0, -ax[2], ax[1]], [ax[2], 0, -ax[0]], [-ax[1], ax[0], 0]])
+    G = np.eye(3) + np.sin(th) * K + (1 - np.cos(th)) * K @ K
+    true_up = G @ np.array([0.0, 0.0, 1.0])
+    Rt = R @ G.T
+    up = _camera_up(Rt)
+    assert np.degrees(np.arccos(np.clip(up @ true_up, -1, 1))) < 0.1
+    mean_minus_y = -Rt[:, 1, :].mean(axis=0)
+    mean_minus_y /= np.linalg.norm(mean_minus_y)
+    assert np.degrees(np.arccos(mean_minus_y @ true_up)) > 5.0  # what the old rule gave
+    # one heading only: the x axes do not define up; fall back to the mean −y
+    narrow = look_at(C[:20], C[:20] + np.array([1.0, 0.0, -0.3]))
+    fallback = _camera_up(narrow)
+    expected = -narrow[:, 1, :].mean(axis=0)
+    np.testing.assert_allclose(fallback, expected / np.linalg.norm(expected), atol=1e-12)

@@ -70,8 +70,8 @@ def scene(tmp_path_factory):
     return render.render_scene(
         out,
         n_wearers=3,
-        duration=3.0,
-        size=(320, 240),
+        duration=4.0,
+        size=(400, 300),
         seed=0,
         calibration=False,
         progress=False,
@@ -91,22 +91,21 @@ def posed(scene, tmp_path_factory, no_vocab_tree):
 def test_small_scene_every_frame_posed_against_truth(scene, posed):
     _, rec, _ = posed
     d = rec.to_dict()
-    assert d["n_frames"] == 3 * 30
-    # measured 76/90 (seed 0: one wearer's last keyframe is not registered and its tracks
-    # die at the end; 320×240); ≥ 98 % is the issue's target at 640×480, 20 s
-    assert d["registered_fraction"] >= 0.75, d["quality"]
+    assert d["n_frames"] == 3 * 40
+    # Measured on this scene size (3 wearers × 4 s, 400×300) over seeds 0–3 with upright
+    # cameras: 98–100 % posed; centres 4.3–13 mm median, 12–97 mm max; rotations
+    # 0.23–0.56° median; scale 0.994–1.020. (At 3 s, 320×240 with upright cameras, 4 seeds
+    # of 5 left a wearer unplaced and seed 0 placed one with a 27 % wrong focal length:
+    # too small a scene to self-calibrate.) COLMAP's matching is not deterministic across
+    # runs (thread scheduling), so the bounds cover the spread seen.
+    assert d["registered_fraction"] >= 0.9, d["quality"]
     e = pose_errors(rec, _truth_cams(scene.truth))
-    # measured: centres 4.6 mm median, 29 mm max; rotations 0.18° median, 0.63° max in
-    # development runs, but 13 mm median in a clean CI run: COLMAP's matching is not
-    # deterministic across runs (thread scheduling), so the bound covers the spread seen.
     assert np.median(e.centre) < 0.025
-    assert np.degrees(np.median(e.rotation)) < 0.5
+    assert np.degrees(np.median(e.rotation)) < 1.0
     assert e.centre.max() < 0.10  # no pose more than 10 cm off (drop instead)
-    # largest rotation error: 0.6–2.4° over clean CI runs (COLMAP is not deterministic
-    # across runs at 320×240 with 3-s clips)
     assert np.degrees(e.rotation.max()) < 3.0
     # metric scale from the known distance: the fitted truth/estimate scale is 1
-    assert e.scale == pytest.approx(1.0, abs=0.02)
+    assert e.scale == pytest.approx(1.0, abs=0.03)
     # every wearer has keyframes and in-between frames
     for name in rec.names:
         q = rec.quality[name]
@@ -116,10 +115,17 @@ def test_small_scene_every_frame_posed_against_truth(scene, posed):
 
 def test_poses_are_gravity_aligned_and_pinhole(scene, posed):
     _, rec, _ = posed
-    # gravity: the mean camera "up" (−y of the camera) is +z of the world
-    R = np.concatenate([c.R for c in rec.cameras.values()])
-    up = -R[:, 1, :].mean(axis=0)
-    assert up[2] / np.linalg.norm(up) > 0.999
+    # gravity: the world's +z seen from each camera (R e_z) is the true up seen from it.
+    # Measured 0.7–2.8° median over seeds 0–2 of this scene size; with the mean camera −y as
+    # "up" (it leans where people look), 5.5–8.1°.
+    truth = _truth_cams(scene.truth)
+    ang = []
+    for name, cam in rec.cameras.items():
+        t = truth[name]
+        k = np.abs(t.times[None] - cam.times[:, None]).argmin(axis=1)
+        cos = np.einsum("fi,fi->f", cam.R[:, :, 2], t.R[k][:, :, 2])
+        ang.append(np.degrees(np.arccos(np.clip(cos, -1.0, 1.0))))
+    assert np.median(np.concatenate(ang)) < 4.0
     # K is the pinhole part of the lens (OpenCV pixels): close to the true one
     for v, name in enumerate(scene.truth.names):
         K = rec.cameras[name].K[0]
@@ -129,6 +135,52 @@ def test_poses_are_gravity_aligned_and_pinhole(scene, posed):
         # the principal point is not refined (image centre): exact up to the COLMAP→OpenCV
         # half-pixel shift, which must be applied once
         assert np.abs(K[:2, 2] - Kt[:2, 2]).max() < 0.05
+
+
+@pytest.mark.filterwarnings("ignore::socialcam.sfm.VideoPosesWarning")
+def test_global_mapping(scene, tmp_path, no_vocab_tree):
+    """COLMAP's global mapper instead of the incremental one, behind the same outlier check
+    (keyframes observing too few map points are rejected) and the same frame posing."""
+    rec = sfm.reconstruct_videos(
+        scene.videos,
+        out_dir=tmp_path / "o",
+        sync=_manual(scene.truth),
+        known_distance=_known_distance(scene.truth),
+        global_mapping=True,
+        progress=False,
+    )
+    d = rec.to_dict()
+    e = pose_errors(rec, _truth_cams(scene.truth))
+    got = (d["registered_fraction"], e.to_dict())
+    # measured on seed 0: 100 % posed, centres 7.3 mm median and 15.5 mm max, rotations
+    # 0.41° median, scale 1.015
+    assert d["registered_fraction"] >= 0.9, got
+    assert np.median(e.centre) < 0.025, got
+    assert e.centre.max() < 0.10, got
+    assert np.degrees(np.median(e.rotation)) < 1.0, got
+    assert e.scale == pytest.approx(1.0, abs=0.03), got
+
+
+@pytest.mark.filterwarnings("ignore::socialcam.sfm.VideoPosesWarning")
+def test_eye_height_gives_metric_scale(scene, tmp_path, no_vocab_tree):
+    """Scale from the wearers' mean eye (camera) height above the floor found among the map
+    points, instead of a known distance; the origin is on the floor."""
+    eye = float(np.mean([scene.truth.cameras(v).C[:, 2].mean() for v in range(3)]))
+    rec = sfm.reconstruct_videos(
+        scene.videos,
+        out_dir=tmp_path / "o",
+        sync=_manual(scene.truth),
+        eye_height=eye,
+        progress=False,
+    )
+    assert rec.counts["floor_found"], rec.warnings
+    e = pose_errors(rec, _truth_cams(scene.truth))
+    # measured over seeds 0–2 of this scene size: scale 0.980–1.065 (the floor of a 4-s
+    # clip is seen from few places: its map points scatter by ±0.1 m); with gravity from
+    # the mean camera −y, 0.848–0.944
+    assert e.scale == pytest.approx(1.0, abs=0.1), e.to_dict()
+    heights = np.concatenate([c.C[:, 2] for c in rec.cameras.values()])
+    assert heights.mean() == pytest.approx(eye, rel=0.05)
 
 
 def test_run_folder_files(scene, posed):
@@ -362,23 +414,54 @@ def test_wrong_intrinsics_are_detected(scene, tmp_path, no_vocab_tree):
     # NOT detected yet — see the issue-9 report.
 
 
+@pytest.fixture(scope="module")
+def lens_scenes(tmp_path_factory):
+    """The fixture scene's size (3 wearers × 4 s, 400×300) with another seed, seen through a
+    radial and a fisheye lens (rendered once each)."""
+    out = tmp_path_factory.mktemp("lens")
+    cache: dict[str, render.RenderedScene] = {}
+
+    def get(lens: str) -> render.RenderedScene:
+        if lens not in cache:
+            cache[lens] = render.render_scene(
+                out / lens,
+                n_wearers=3,
+                duration=4.0,
+                size=(400, 300),
+                seed=1,
+                distortion=lens,
+                calibration=False,
+                progress=False,
+            )
+        return cache[lens]
+
+    return get
+
+
+def _true_undistort(truth, v: int, px: np.ndarray) -> np.ndarray:
+    """Pixels ``px (N, 2)`` of wearer ``v``'s distorted image on the true pinhole image."""
+    import cv2
+
+    K, d = truth.K[v], truth.dist[v]
+    pts = px[:, None].astype(np.float64)
+    if d["model"] == "fisheye":
+        return cv2.fisheye.undistortPoints(pts, K, np.asarray(d["params"], float), P=K)[:, 0]
+    coeffs = np.r_[np.asarray(d["params"], float), np.zeros(2)]
+    return cv2.undistortPoints(pts, K, coeffs, P=K)[:, 0]
+
+
 @pytest.mark.filterwarnings("ignore::socialcam.sfm.VideoPosesWarning")
-@pytest.mark.parametrize("lens", ["radial"])
-def test_distorted_lens_scene(tmp_path, lens, no_vocab_tree):
-    s = render.render_scene(
-        tmp_path / "s",
-        n_wearers=2,
-        duration=3.0,
-        size=(320, 240),
-        # a scene whose wearers share views within 3 s (in many 3-s two-wearer scenes
-        # one of them only sees walls the other never sees and stays unplaced: that case is
-        # test_one_wearer_and_a_wearer_from_another_room)
-        seed=1,
-        distortion=lens,
-        calibration=False,
-        progress=False,
-    )
-    model = {"radial": "RADIAL", "fisheye": "OPENCV_FISHEYE"}[lens]
+@pytest.mark.parametrize(
+    ("lens", "model", "lens_px"),
+    # lens_px: largest error of the self-calibrated lens on a 3×3 grid of pixels over the
+    # three wearers, measured 0.7 px (radial) and 2.7 px (fisheye: 4 coefficients from 4 s)
+    [("radial", "RADIAL", 1.5), ("fisheye", "OPENCV_FISHEYE", 4.0)],
+)
+def test_distorted_lens_scene(lens_scenes, tmp_path, lens, model, lens_px, no_vocab_tree):
+    """Action-camera lenses: poses and the lens model itself, self-calibrated from the
+    videos. A fisheye model needs a focal-length prior (``focal_prior``, default 0.5 of the
+    image width): without it COLMAP marks every pair as degenerate and no model is built."""
+    s = lens_scenes(lens)
     rec = sfm.reconstruct_videos(
         s.videos,
         out_dir=tmp_path / "o",
@@ -389,27 +472,33 @@ def test_distorted_lens_scene(tmp_path, lens, no_vocab_tree):
     frac = rec.to_dict()["registered_fraction"]
     e = pose_errors(rec, _truth_cams(s.truth))
     got = (frac, e.to_dict())
-    assert frac >= 0.75, got
-    # measured (renderer of December 2026, seed 1): 88 % posed, 9.0 mm median centre,
-    # 0.56° median rotation, 21 mm max; without undistortion between keyframes (mutation)
-    # 33 mm median
-    assert np.median(e.centre) < 0.012, got
-    assert np.degrees(np.median(e.rotation)) < 1.0, got
+    # measured on seeds 0 and 1 of this scene size: radial 97–100 % posed, centres 8.3–9.3 mm
+    # median, rotations 0.15–0.42° median; fisheye 100 %, 7.7–12.8 mm, 0.21–1.25°; focal
+    # lengths within 1 % of the truth
+    assert frac >= 0.9, got
+    assert np.median(e.centre) < 0.025, got
+    assert np.degrees(np.median(e.rotation)) < 2.0, got
     assert e.centre.max() < 0.10, got
-    # undistortion: the lens model maps raw pixels onto the true pinhole pixels
-    v = 0
-    name = s.truth.names[v]
-    params = s.truth.dist[v]["params"]
-    K = s.truth.K[v]
-    import cv2
+    # undistortion: the lens model maps raw pixels onto the true pinhole pixels, compared
+    # as normalised rays (the estimated K differs slightly from the true one)
+    w, h = 400, 300
+    grid = np.stack(np.meshgrid([20.0, w / 2, w - 20.0], [20.0, h / 2, h - 20.0]), -1)
+    grid = grid.reshape(-1, 2)
+    for v, name in enumerate(s.truth.names):
+        K = s.truth.K[v]
+        tn = (_true_undistort(s.truth, v, grid) - K[:2, 2]) / K[0, 0]
+        est_K = rec.cameras[name].K[0]
+        en = (rec.cameras[name][:1].undistort_points(grid[None])[0] - est_K[:2, 2]) / est_K[0, 0]
+        assert np.abs(tn - en).max() * K[0, 0] < lens_px, (name, np.abs(tn - en).max() * K[0, 0])
 
-    grid = np.stack(np.meshgrid([20.0, 160.0, 300.0], [20.0, 120.0, 220.0]), -1).reshape(-1, 2)
-    coeffs = np.r_[np.asarray(params, float), np.zeros(max(0, 4 - len(params)))]
-    true_und = cv2.undistortPoints(grid[:, None], K, coeffs, P=K).reshape(-1, 2)
-    est_und = rec.cameras[name][:1].undistort_points(grid[None])[0]
-    est_K = rec.cameras[name].K[0]
-    # compare as normalised rays (the estimated K differs slightly from the true one)
-    tn = (true_und - K[:2, 2]) / K[0, 0]
-    en = (est_und - est_K[:2, 2]) / est_K[0, 0]
-    # measured 1.9 px at the corners (lens self-calibrated from 2 wearers × 3 s, 320×240)
-    assert np.abs(tn - en).max() * K[0, 0] < 2.5  # pixels
+
+def test_focal_prior_option():
+    """The focal-length prior: validated, 0.5 of the image for fisheye models by default
+    (without a prior, test_distorted_lens_scene[fisheye] builds no model at all)."""
+    with pytest.raises(ValueError, match="focal_prior"):
+        sfm.VideoSfmOptions(focal_prior=0.0)
+    with pytest.raises(ValueError, match="focal_prior"):
+        sfm.VideoSfmOptions(focal_prior=float("nan"))
+    assert sfm.VideoSfmOptions(focal_prior=0.7).focal_factor == 0.7
+    assert sfm.VideoSfmOptions(camera_model="OPENCV_FISHEYE").focal_factor == 0.5
+    assert sfm.VideoSfmOptions(camera_model="RADIAL").focal_factor == 1.2

@@ -53,6 +53,18 @@ def main(argv: Sequence[str] | None = None) -> int:
     pz.add_argument("videos", nargs="+", metavar="VIDEO", help="one video per wearer")
     pz.add_argument("--out", required=True, help="output folder")
     _sfm_flags(pz)
+    pz.add_argument(
+        "--focal-prior",
+        type=float,
+        default=None,
+        help="initial focal length / larger image side without given intrinsics "
+        "(default: 1.2, fisheye models 0.5)",
+    )
+    pz.add_argument(
+        "--global-mapping",
+        action="store_true",
+        help="COLMAP's global mapper (default: incremental)",
+    )
     pz.add_argument("--json", action="store_true", help="print the whole report as JSON")
     rn = sub.add_parser(
         "run",
@@ -255,7 +267,14 @@ def _poses(parser: argparse.ArgumentParser, args: argparse.Namespace) -> int:
             known_distance=known,
             eye_height=args.eye_height,
             progress=sys.stderr.isatty(),
-            **_given(args, keyframe_fps="keyframe_fps", camera_model="camera_model", seed="seed"),  # type: ignore[arg-type]
+            global_mapping=args.global_mapping,
+            **_given(
+                args,
+                keyframe_fps="keyframe_fps",
+                camera_model="camera_model",
+                focal_prior="focal_prior",
+                seed="seed",
+            ),  # type: ignore[arg-type]
         )
     except ValueError as exc:
         print(f"socialcam poses: error: {exc}", file=sys.stderr)

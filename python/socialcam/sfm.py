@@ -172,6 +172,12 @@ class VideoSfmOptions:
         corners of the last keyframe can be followed into it (KLT, half resolution); 0 keeps
         the fixed rate ``keyframe_fps``.
     camera_model : COLMAP camera model of every wearer's lens (one camera per wearer).
+    focal_prior : without given ``intrinsics``, the initial focal length as a fraction of
+        the larger image side (refined by bundle adjustment). ``None``: 1.2 for the
+        perspective models (COLMAP's default, a ~45° field) and 0.5 for the fisheye models
+        (an equidistant lens with a ~110° field, as action cameras have). Fisheye models
+        always start from this prior: COLMAP cannot recover a fisheye focal length from a
+        pair of views and marks every pair without one as degenerate.
     max_features : SIFT features per keyframe.
     sequential_overlap : each keyframe is matched with this many following keyframes of
         the same video.
@@ -199,6 +205,7 @@ class VideoSfmOptions:
     keyframe_fps: float = 1.0
     keyframe_overlap: float = 0.5
     camera_model: VideoCameraModel = "SIMPLE_RADIAL"
+    focal_prior: float | None = None
     max_features: int = 2048
     sequential_overlap: int = 3
     cross_pairs: int = 2
@@ -223,6 +230,8 @@ class VideoSfmOptions:
             )
         check_float(self.keyframe_overlap, "keyframe_overlap", min=0.0, max=1.0)
         check_choice(self.camera_model, "camera_model", tuple(get_args(VideoCameraModel)))
+        if self.focal_prior is not None:
+            check_float(self.focal_prior, "focal_prior", min=0.05, max=20.0)
         check_int(self.max_features, "max_features", min=64, max=65536)
         check_int(self.sequential_overlap, "sequential_overlap", min=1, max=100)
         check_int(self.cross_pairs, "cross_pairs", min=0, max=100)
@@ -238,6 +247,18 @@ class VideoSfmOptions:
         for name in ("global_mapping", "refine_intrinsics"):
             if not isinstance(getattr(self, name), bool):
                 raise ValueError(f"{name}: expected True or False, got {getattr(self, name)!r}")
+
+    @property
+    def fisheye(self) -> bool:
+        """Whether ``camera_model`` is a fisheye model."""
+        return self.camera_model.endswith("FISHEYE")
+
+    @property
+    def focal_factor(self) -> float:
+        """Initial focal length ÷ larger image side (``focal_prior`` or its default)."""
+        if self.focal_prior is not None:
+            return float(self.focal_prior)
+        return 0.5 if self.fisheye else 1.2
 
     @property
     def keyframe_step(self) -> int:
@@ -656,6 +677,26 @@ def _gravity_rotation(up: FloatArray) -> FloatArray:
     return np.eye(3) + vx + vx @ vx / (1 + c)
 
 
+def _camera_up(R: FloatArray) -> FloatArray:
+    """World "up" (unit) seen by head cameras ``R (N, 3, 3)`` (world→camera).
+
+    People nod and look down far more than they tilt their head sideways, so the mean
+    camera "up" (−y) leans towards where they looked (6–8° on 4-s rendered clips), while the
+    camera x axes stay nearly horizontal: up is the direction most nearly perpendicular to
+    all of them (the least eigenvector of Σ x xᵀ), signed like the mean −y. When the x axes
+    span too narrow a range of headings for that to be defined, the mean −y is used."""
+    minus_y = -R[:, 1, :].mean(axis=0)
+    minus_y /= np.linalg.norm(minus_y)
+    x = R[:, 0, :]
+    w, vecs = np.linalg.eigh(x.T @ x / len(x))
+    # w[0] ≈ 0 (roll noise) and w[1] ≳ sin² of the heading spread: well defined when the
+    # headings spread over more than ~25° (w[1] > 0.05) and w[0] is clearly smaller.
+    if w[1] < 0.05 or w[0] > 0.25 * w[1]:
+        return np.asarray(minus_y)
+    up = vecs[:, 0] * np.sign(vecs[:, 0] @ minus_y)
+    return np.asarray(up)
+
+
 def _floor_height(points: FloatArray, cam_heights: FloatArray, seed: int) -> float | None:
     """Height (along +z) of the floor: the densest horizontal layer of map points well below
     every camera, or ``None`` when there are too few points there."""
@@ -861,6 +902,7 @@ def reconstruct_videos(
         db_path.unlink()
     reader = pycolmap.ImageReaderOptions()
     reader.camera_model = opts.camera_model
+    reader.default_focal_length_factor = opts.focal_factor
     extraction = pycolmap.FeatureExtractionOptions()
     extraction.num_threads = opts.num_threads
     extraction.sift.max_num_features = opts.max_features
@@ -879,16 +921,20 @@ def reconstruct_videos(
     db = pycolmap.Database.open(str(db_path))
     try:
         images = {img.name: img for img in db.read_all_images()}
-        if own_k:
-            done: set[int] = set()
-            for img in images.values():
-                person = img.name.split("/")[0]
-                if person in own_k and img.camera_id not in done:
-                    cam = db.read_camera(img.camera_id)
-                    cam.params = own_k[person]
-                    cam.has_prior_focal_length = True
-                    db.update_camera(cam)
-                    done.add(img.camera_id)
+        # Given intrinsics replace the reader's guess; a fisheye lens (or a focal_prior the
+        # user gave) starts from a focal length that the two-view verification trusts.
+        trust_prior = opts.fisheye or opts.focal_prior is not None
+        done: set[int] = set()
+        for img in images.values():
+            person = img.name.split("/")[0]
+            if img.camera_id in done or not (person in own_k or trust_prior):
+                continue
+            cam = db.read_camera(img.camera_id)
+            if person in own_k:
+                cam.params = own_k[person]
+            cam.has_prior_focal_length = True
+            db.update_camera(cam)
+            done.add(img.camera_id)
     finally:
         db.close()
     lap("features")
@@ -1044,7 +1090,7 @@ def reconstruct_videos(
         for name in lens
     }
 
-    # ---- world frame: gravity from the mean camera "up", metric scale
+    # ---- world frame: gravity from the cameras' horizontal x axes, metric scale
     kf_R = np.array(
         [
             (
@@ -1053,9 +1099,7 @@ def reconstruct_videos(
             for img in reg.values()
         ]
     )
-    up = -kf_R[:, 1, :].mean(axis=0)
-    up /= np.linalg.norm(up)
-    G = _gravity_rotation(up)
+    G = _gravity_rotation(_camera_up(kf_R))
     ids = sorted(rec.points3D)
     pts_m = np.array([rec.points3D[i].xyz for i in ids]).reshape(-1, 3)
     cols = np.array([rec.points3D[i].color for i in ids], dtype=np.uint8).reshape(-1, 3)
