@@ -14,7 +14,9 @@ Fig 4.3(a)/(b) sweeps (--full). Methods: the thesis, the robust method keeping t
 lowest reprojection error ("robust-mincost", ``select_tol=0``) and the robust method
 (default: the smoothest of the starts that the pixels cannot tell apart). Development
 windows: 131_01 and 85_02 at offsets 0, 60, 120 (select_tol was chosen on them);
-held out: all of 131_02, and every clip at offsets 30 and 90.
+held out: all of 131_02, and every clip at offsets 30 and 90; new (never looked at while
+the method was changed): CMU 131_01 frames 150–449 (starting to walk) and 131_02 frames
+850–1149 (walking to a stop), every offset.
 Run: python benches/articulated_accuracy.py [--quick | --full]
 """
 
@@ -127,6 +129,7 @@ def run(
 
 
 METHODS = ("thesis", "robust-mincost", "robust")
+PARTS = ("dev", "held-out", "new")
 
 
 def main() -> None:
@@ -139,17 +142,26 @@ def main() -> None:
         "131_01": bvh_clip("cmu_131_01_walk300.bvh"),
         "131_02": bvh_clip("cmu_131_02_walk300.bvh"),
         "85_02": c3d_clip("cmu_85_02.c3d"),
+        "131_01s": bvh_clip("cmu_131_01_start300.bvh"),
+        "131_02e": bvh_clip("cmu_131_02_stop300.bvh"),
     }
+    new_clips = ("131_01s", "131_02e")
     dev_clips = ("131_01", "85_02")
     wins: list[tuple[str, Window]] = []
     for name, (P, pairs) in clips.items():
         for off in (0, 30, 60, 90, 120):
             if P[off::2].shape[0] < 60:
                 continue
-            part = "dev" if name in dev_clips and off % 60 == 0 else "held-out"
+            part = (
+                "new"
+                if name in new_clips
+                else "dev"
+                if name in dev_clips and off % 60 == 0
+                else "held-out"
+            )
             wins.append((part, window(name, P, pairs, 2, off)))
     good = [(part, w, j, p) for part, w in wins for j, p in w.pairs if w.eta[j] > 1.25]
-    for part in ("dev", "held-out"):
+    for part in PARTS:
         sel = [(w.clip, off) for pt, w in wins for off in [0] if pt == part]
         print(
             f"{part}: {len(sel)} windows, {sum(1 for g in good if g[0] == part)} joints with η_a > 1.25"
@@ -173,7 +185,7 @@ def main() -> None:
     def report(title: str, **kw) -> None:
         print(f"\n{title}")
         print("  mean / median of the relative error; per clip: mean [min–max over seeds]")
-        for part in ("dev", "held-out"):
+        for part in PARTS:
             jobs = [g for g in good if g[0] == part]
             for method in METHODS:
                 res: dict[tuple[str, int], list[float]] = {}

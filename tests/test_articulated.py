@@ -93,10 +93,7 @@ def _orbit(P: np.ndarray, aim: np.ndarray) -> tuple[sc.Cameras, np.ndarray]:
     ang = np.linspace(-0.5, 0.5, F)[:, None]
     C = aim + 1.5 * (np.cos(ang) * side + np.sin(ang) * walk) + [0.0, 0.3, 0.0]
     K = np.array([[1000.0, 0, 640], [0, 1000.0, 360], [0, 0, 1]])
-    # rolled 180° about the optical axis, as every camera of synth.look_at was before its
-    # fix: the scene these thresholds were measured on (the thesis method's result on a
-    # joint can flip with the noise realisation; see issue 12)
-    R = np.diag([-1.0, -1.0, 1.0]) @ look_at(C, aim, up=(0.0, 1.0, 0.0))
+    R = look_at(C, aim, up=(0.0, 1.0, 0.0))
     cams = sc.Cameras(K, R, C, np.arange(F) / 60)
     Ks = np.broadcast_to(K, (F, 3, 3))
     px = np.stack(
@@ -170,67 +167,110 @@ def _run(
     return out, scene.rel_error(out.points, j)
 
 
-def test_error_is_low_when_reconstructability_is_high(scene: Scene) -> None:
-    # Fig 4.2(c): η_a ≫ 1 → the truth; η_a < 1 → the (smoother) impostor.
-    errs = {j: _run(scene, j)[1] for j in scene.eta}
-    high = [errs[j] for j, e in scene.eta.items() if e > 1.25]
-    low = [errs[j] for j, e in scene.eta.items() if e < 0.95]
-    assert len(high) >= 4 and len(low) >= 3
-    assert np.median(high) < 0.06, (high, low)
-    assert np.median(low) > 0.3, (high, low)
+#: Noise draws every accuracy statistic below is pooled over. One draw is not enough: with
+#: the thesis method a joint's result can flip between the truth and the impostor with the
+#: noise realisation (on this scene, 0.5 px: the median error of the η_a > 1.25 joints is
+#: 0.034–0.04 on 7 of 12 draws and 0.5–0.75 on 3). Thresholds below come from seeds 0–11
+#: pooled in groups of four; "measured" gives the range over seeds 0–3, 4–7 and 8–11.
+SEEDS = range(4)
+
+_CACHE: dict[tuple, np.ndarray] = {}
+
+
+def _errs(scene: Scene, joints: list[int], method: str, **kw) -> np.ndarray:
+    """Relative errors ``(len(SEEDS), len(joints))`` under the conditions ``kw`` of
+    :func:`_run` (cached: several tests share conditions)."""
+    key = (tuple(joints), method, tuple(sorted(kw.items())))
+    if key not in _CACHE:
+        _CACHE[key] = np.array(
+            [[_run(scene, j, seed=s, method=method, **kw)[1] for j in joints] for s in SEEDS]
+        )
+    return _CACHE[key]
 
 
 def _good(scene: Scene) -> list[int]:
     return [j for j, e in scene.eta.items() if e > 1.25]
 
 
+def _low(scene: Scene) -> list[int]:
+    return [j for j, e in scene.eta.items() if e < 0.95]
+
+
+def test_error_is_low_when_reconstructability_is_high(scene: Scene) -> None:
+    # Fig 4.2(c): η_a ≫ 1 → the truth; η_a < 1 → the (smoother) impostor. Thesis method,
+    # 0.5 px, pooled over the draws: median 0.068–0.097 for η_a > 1.25 (one draw: 0.034 to
+    # 0.75), 1.13 on every draw for η_a < 0.95.
+    high, low = _errs(scene, _good(scene), "thesis"), _errs(scene, _low(scene), "thesis")
+    assert high.shape[1] >= 4 and low.shape[1] >= 3
+    assert np.median(high) < 0.2, np.median(high, axis=1)
+    assert np.median(low) > 0.8, np.median(low, axis=1)
+
+
+def test_robust_method_is_stable_over_noise_draws(scene: Scene) -> None:
+    # The same scene and noise with the robust method: the median error of the η_a > 1.25
+    # joints is 0.031–0.038 on each of 12 draws (pooled mean 0.089–0.136: RightHip,
+    # η_a = 1.26, follows the impostor on most draws).
+    high = _errs(scene, _good(scene), "robust")
+    assert np.median(high, axis=1).max() < 0.06, np.median(high, axis=1)
+    assert high.mean() < 0.2, high.mean(axis=1)
+
+
 def test_error_grows_with_root_error(scene: Scene) -> None:
-    # Fig 4.3(a): the error grows with the ratio of root error to bone length. (Our
-    # shoulders already flip to the impostor at a ratio of 0.05, so we compare medians.)
+    # Fig 4.3(a): the error grows with the ratio of root error to bone length. Thesis
+    # method, pooled medians measured: 0.068–0.097 (exact root), 0.386–0.604 (0.1),
+    # 0.698–0.807 (0.5).
     good = _good(scene)
     med = {
-        ratio: np.median([_run(scene, j, root_ratio=ratio)[1] for j in good])
+        ratio: float(np.median(_errs(scene, good, "thesis", root_ratio=ratio)))
         for ratio in (0.0, 0.1, 0.5)
     }
-    assert med[0.0] < 0.06, med
+    assert med[0.0] < 0.2, med
     assert med[0.0] < med[0.1] < med[0.5], med
-    assert med[0.5] > 0.3, med
+    assert med[0.5] > 0.5, med
 
 
 def test_robust_to_small_radius_scale(scene: Scene) -> None:
     # Fig 4.3(b): radius scales 1e-2 … 1e0 reconstruct reliably (the sphere is enlarged to
-    # meet every ray); a scale of 3 is unreliable (every ray meets the too-large sphere).
+    # meet every ray, so the result is that of the exact length); a scale of 3 is
+    # unreliable (every ray meets the too-large sphere): median 2.88–3.11.
     good = _good(scene)
-    med = {s: np.median([_run(scene, j, scale=s)[1] for j in good]) for s in (0.01, 0.1, 1.0, 3.0)}
-    for s in (0.01, 0.1, 1.0):
-        assert med[s] < 0.06, med
-    assert med[3.0] > 1.0, med
+    exact = _errs(scene, good, "thesis")
+    np.testing.assert_allclose(_errs(scene, good, "thesis", scale=0.01), exact, atol=0.01)
+    assert np.median(exact) < 0.2
+    assert np.median(_errs(scene, good, "thesis", scale=3.0)) > 1.0
 
 
 def test_five_percent_missing_data(scene: Scene) -> None:
-    # Fig 4.3(c): 5% missing, 0.5 px noise, length under-estimated by 5% (thesis: 13% mean
-    # relative error, also with root error). An over-estimated length or root error flips
-    # some joints to the impostor here (see the two tests above).
+    # Fig 4.3(c): 5% missing, 0.5 px noise, length under-estimated by 5%. Pooled medians
+    # measured: thesis 0.068–0.096, robust 0.034–0.037 (per draw ≤ 0.041).
     good = _good(scene)
-    errs = [_run(scene, j, scale=0.95, missing=0.05)[1] for j in good]
-    assert np.median(errs) < 0.06, errs
+    kw = {"scale": 0.95, "missing": 0.05}
+    assert np.median(_errs(scene, good, "thesis", **kw)) < 0.2
+    robust = _errs(scene, good, "robust", **kw)
+    assert np.median(robust, axis=1).max() < 0.06, np.median(robust, axis=1)
     out, _ = _run(scene, good[0], missing=0.05)
     assert out.points.shape == (60, 3) and np.isfinite(out.points).all()
 
 
+FIG_43C = {"noise": 1.0, "root_ratio": 0.05, "scale": 1.05, "missing": 0.05}
+
+
 def test_fitted_radius_under_thesis_conditions(scene: Scene) -> None:
     # The thesis' Fig 4.3(c) conditions: 5% missing, 1 px noise, 5% root error and a 5%
-    # length error. Only enlarging the sphere (the thesis) flips joints to the impostor;
-    # fitting the radius to the rays keeps most of them (mean reported by the bench note).
+    # length error. Only enlarging the sphere (the thesis) flips joints to the impostor
+    # (mean 0.62–0.75); fitting the radius to the rays keeps more of them (mean
+    # 0.48–0.53, 0.64–0.84 × the thesis'; median 0.28–0.49).
     good = _good(scene)
-    kw = {"noise": 1.0, "root_ratio": 0.05, "scale": 1.05, "missing": 0.05}
-    fitted = [_run(scene, j, fit=True, **kw)[1] for j in good]
-    thesis = [_run(scene, j, **kw)[1] for j in good]
-    assert np.median(fitted) < 0.1, fitted
-    assert np.mean(fitted) < np.mean(thesis), (fitted, thesis)
+    fitted = _errs(scene, good, "thesis", fit=True, **FIG_43C)
+    thesis = _errs(scene, good, "thesis", **FIG_43C)
+    assert np.median(fitted) < 0.6, np.median(fitted)
+    assert fitted.mean() < 0.9 * thesis.mean(), (fitted.mean(), thesis.mean())
     # Fitting ignores an over-estimated length entirely.
-    out, e = _run(scene, good[0], scale=3.0, fit=True)
-    assert e < 0.06 and out.radius < 1.02 * scene.skeleton.lengths[good[0]]
+    j = good[-1]
+    out, e = _run(scene, j, scale=3.0, fit=True)
+    _, e1 = _run(scene, j, fit=True)
+    assert out.radius < 1.02 * scene.skeleton.lengths[j]
+    assert e == pytest.approx(e1, abs=1e-6)
 
 
 def test_skeleton_recursive_and_presets(scene: Scene) -> None:
@@ -291,18 +331,16 @@ def test_robust_refines_the_length_per_joint(scene: Scene) -> None:
             assert bias < 0.5 * limit, (j, bias)
 
 
-def test_robust_under_thesis_conditions_per_joint(scene: Scene) -> None:
-    # Fig 4.3(c): 1 px noise, 5 % root error, length × 1.05, 5 % missing (seed 0).
-    # Measured per joint, robust: 0.056 0.098 0.034 0.118 0.041 (thesis method: 1.213
-    # 0.723 1.187 0.075 0.473, mean 0.734).
+def test_robust_under_thesis_conditions(scene: Scene) -> None:
+    # Fig 4.3(c) conditions, pooled over the draws. Measured, robust: median 0.069–0.088,
+    # mean 0.215–0.319 (per draw 0.07–0.40: one or two joints follow the impostor), 0.30–0.51
+    # × the thesis method's (mean 0.62–0.75).
     good = _good(scene)
-    kw = {"noise": 1.0, "root_ratio": 0.05, "scale": 1.05, "missing": 0.05}
-    limits = [0.11, 0.2, 0.07, 0.2, 0.08]
-    robust = [_run(scene, j, method="robust", **kw)[1] for j in good]
-    thesis = [_run(scene, j, method="thesis", **kw)[1] for j in good]
-    for j, e, limit in zip(good, robust, limits, strict=True):
-        assert e < limit, (j, robust)
-    assert np.mean(robust) < 0.3 * np.mean(thesis), (robust, thesis)
+    robust = _errs(scene, good, "robust", **FIG_43C)
+    thesis = _errs(scene, good, "thesis", **FIG_43C)
+    assert np.median(robust) < 0.12, np.median(robust, axis=1)
+    assert robust.mean() < 0.4, robust.mean(axis=1)
+    assert robust.mean() < 0.6 * thesis.mean(), (robust.mean(), thesis.mean())
 
 
 def test_articulated_options_validation(scene: Scene) -> None:
@@ -351,37 +389,32 @@ def _marker_window() -> tuple[np.ndarray, list[tuple[int, int]], sc.Cameras, np.
 
 
 def test_robust_start_selection_on_markers() -> None:
-    # Fig 4.3(c) conditions on another clip (optical markers), the joints with η_a > 1.25.
-    # The pixels cannot tell the truth's basin from the impostor's (after the refinement
-    # of Eq 4.5 the impostor often reprojects a few px² better), so the robust method keeps
-    # a clearly smoother start that the pixels cannot reject. Measured (seed 0, 31 joints):
-    # mean 0.185, median 0.060, 23 joints below 0.15; keeping the lowest cost
-    # (select_tol=0): mean 0.234 (two more joints at 0.98 and 0.52); the thesis method:
-    # mean 0.278; without the refinement of Eq 4.5: mean 0.265. (Two joints, at 1.31 and
-    # 1.80, still follow the impostor: the thesis method gets them right.)
+    # Fig 4.3(c) conditions on another clip (optical markers), the joints with η_a > 1.25,
+    # pooled over two noise draws. The pixels cannot tell the truth's basin from the
+    # impostor's (after the refinement of Eq 4.5 the impostor often reprojects a few px²
+    # better), so the robust method keeps a clearly smoother start that the pixels cannot
+    # reject. Measured per draw (seeds 0–3, 31 joints): mean 0.206 0.299 0.307 0.221, median
+    # 0.067–0.085, 68–77 % of joints below 0.15; keeping the lowest cost (select_tol=0):
+    # mean 0.300 0.303 0.346 0.220 (so robust / lowest cost = 0.84 on seeds 0–1, 0.93 on
+    # 2–3); the thesis method: 0.285–0.328.
     P, pairs, cams, px = _marker_window()
     F = P.shape[0]
-    errs: dict[str, list[float]] = {"robust": [], "mincost": [], "thesis": []}
-    for j, p in pairs:
+    errs: dict[str, list[float]] = {"robust": [], "mincost": []}
+    for seed, (j, p) in itertools.product((0, 1), pairs):
         if sc.articulated_reconstructability(P[:, j], cams, P[:, p], 8) <= 1.25:
             continue
-        rng = np.random.default_rng(17 * j)
+        rng = np.random.default_rng(seed * 1000 + 17 * j)
         r = float(np.linalg.norm(P[:, j] - P[:, p], axis=1).mean())
         x = px[:, j] + rng.normal(0, 1.0, (F, 2))
         x[rng.random(F) < 0.05] = np.nan
         parent = P[:, p] + _smooth_offset(F, 0.05 * r, rng)
         den = np.linalg.norm(P[:, j] - P[:, p])
-        for name, kw in (
-            ("robust", {}),
-            ("mincost", {"select_tol": 0.0}),
-            ("thesis", {"method": "thesis"}),
-        ):
+        for name, kw in (("robust", {}), ("mincost", {"select_tol": 0.0})):
             out = sc.reconstruct_articulated(x, cams, parent, 1.05 * r, k=8, **kw)
             errs[name].append(float(np.linalg.norm(out.points - P[:, j]) / den))
     robust = np.array(errs["robust"])
-    assert len(robust) >= 25, len(robust)
-    assert robust.mean() < 0.21, errs["robust"]
-    assert np.median(robust) < 0.08, errs["robust"]
-    assert np.mean(robust < 0.15) >= 0.7, errs["robust"]
-    assert robust.mean() < 0.9 * np.mean(errs["mincost"]), errs
-    assert robust.mean() < 0.8 * np.mean(errs["thesis"]), errs
+    assert len(robust) >= 50, len(robust)
+    assert robust.mean() < 0.33, errs["robust"]
+    assert np.median(robust) < 0.1, errs["robust"]
+    assert np.mean(robust < 0.15) >= 0.6, errs["robust"]
+    assert robust.mean() < 0.95 * np.mean(errs["mincost"]), errs
