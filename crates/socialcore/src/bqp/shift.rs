@@ -40,7 +40,7 @@ fn root_bound(model: &Model, solver: &mut BoxQp, clock: &Clock) -> (f64, Vec<f64
 
 /// Smallest eigenvalue of `W + diag(d)`; `None` if the decomposition fails. Small
 /// matrices on one thread (nalgebra), large ones with faer.
-fn min_eigenvalue(model: &Model, d: &[f64]) -> Option<f64> {
+pub(crate) fn min_eigenvalue(model: &Model, d: &[f64]) -> Option<f64> {
     let n = model.n;
     if n <= SMALL {
         let mat =
