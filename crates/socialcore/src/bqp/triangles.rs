@@ -194,7 +194,8 @@ pub(crate) fn refine(
         if max_new > 0 {
             let index: HashMap<Cut, usize> =
                 cuts.iter().enumerate().map(|(t, (c, _))| (*c, t)).collect();
-            for c in separate(n, &x, &p, &index, max_new, 1e-3) {
+            let mut tol = SEPARATION_TOL;
+            for c in separate(n, &x, &p, &index, max_new, &mut tol) {
                 cuts.push((c, 0.0));
             }
         }
@@ -227,18 +228,22 @@ fn key(c: &Cut) -> (u32, u32, u32, u8) {
 }
 
 /// Most violated cuts at `(x̂, p̂)` not already in `active`, at most `max_new`, violation
-/// above `tol`, most violated first (ties by index order: deterministic).
+/// above `tol`, most violated first (ties by index order: deterministic). `tol` adapts
+/// for the next call (never below [`SEPARATION_TOL`]): half the weakest violation kept when
+/// many more were found than kept (so that few are collected next time), a quarter of it
+/// when too few were found.
 fn separate(
     n: usize,
     x: &[f64],
     p: &[f64],
     active: &HashMap<Cut, usize>,
     max_new: usize,
-    tol: f64,
+    tol: &mut f64,
 ) -> Vec<Cut> {
     let mut found: Vec<(f64, Cut)> = Vec::new();
+    let t = *tol;
     let mut push = |cut: Cut, g: f64| {
-        if g > tol {
+        if g > t {
             found.push((g, cut));
         }
     };
@@ -258,24 +263,40 @@ fn separate(
             push(pair(7), xi + xj - pij - 1.0);
             for k in (j + 1)..n {
                 let (pik, pjk, xk) = (p[i * n + k], p[j * n + k], x[k]);
-                let tri = |kind| Cut {
-                    kind,
-                    i: i as u32,
-                    j: j as u32,
-                    k: k as u32,
-                };
-                push(tri(0), xi + xj + xk - pij - pik - pjk - 1.0);
-                push(tri(1), pij + pik - pjk - xi);
-                push(tri(2), pij + pjk - pik - xj);
-                push(tri(3), pik + pjk - pij - xk);
+                let g = [
+                    xi + xj + xk - pij - pik - pjk - 1.0,
+                    pij + pik - pjk - xi,
+                    pij + pjk - pik - xj,
+                    pik + pjk - pij - xk,
+                ];
+                // Most triples violate nothing: one test for the four.
+                if g[0].max(g[1]).max(g[2].max(g[3])) <= t {
+                    continue;
+                }
+                for (kind, gk) in g.into_iter().enumerate() {
+                    let cut = Cut {
+                        kind: kind as u8,
+                        i: i as u32,
+                        j: j as u32,
+                        k: k as u32,
+                    };
+                    push(cut, gk);
+                }
             }
         }
     }
     // Active cuts are kept apart from the new ones after the selection (fewer look-ups).
     let room = max_new + active.len();
     if found.len() > room {
+        let crowded = found.len() > 4 * room;
         found.select_nth_unstable_by(room, |a, b| b.0.total_cmp(&a.0));
         found.truncate(room);
+        if crowded {
+            let weakest = found.iter().map(|f| f.0).fold(f64::INFINITY, f64::min);
+            *tol = (0.5 * weakest).max(SEPARATION_TOL);
+        }
+    } else {
+        *tol = (0.25 * *tol).max(SEPARATION_TOL);
     }
     found.retain(|(_, c)| !active.contains_key(c));
     found.sort_by(|a, b| b.0.total_cmp(&a.0).then_with(|| key(&a.1).cmp(&key(&b.1))));
@@ -305,6 +326,8 @@ fn valid_bound(model: &mut Model, s: &[f64], solver: &mut BoxQp, clock: &Clock) 
 /// evaluated (an eigenvalue decomposition and a box relaxation each).
 const ITERS: usize = 60;
 const EVAL_EVERY: usize = 5;
+/// Smallest violation for which a cut is separated.
+const SEPARATION_TOL: f64 = 1e-3;
 /// Mixing sweeps per iteration (warm-started).
 const SWEEPS: usize = 30;
 /// Mixing sweeps per multiplier step at a node (warm-started).
@@ -338,6 +361,7 @@ pub(crate) fn strengthen(
     let (mut x, mut p) = (vec![0.0; n], vec![0.0; n * n]);
     let mut s = vec![0.0; n];
     let free = vec![FREE; n];
+    let mut tol = SEPARATION_TOL;
     for it in 0..ITERS {
         if clock.out() {
             break;
@@ -364,7 +388,7 @@ pub(crate) fn strengthen(
             }
         }
         primal(n, &mix, &free, &mut x, &mut p);
-        for c in separate(n, &x, &p, &index, n, 1e-3) {
+        for c in separate(n, &x, &p, &index, n, &mut tol) {
             index.insert(c, cuts.len());
             cuts.push((c, 0.0));
         }
