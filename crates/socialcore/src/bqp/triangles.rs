@@ -400,3 +400,22 @@ pub(crate) fn strengthen(
     }
     best
 }
+
+/// Every cut of `n` variables (all kinds, all pairs and triples), for tests.
+#[cfg(test)]
+pub(crate) fn all_cuts(n: usize) -> Vec<Cut> {
+    let mut out = Vec::new();
+    for i in 0..n as u32 {
+        for j in (i + 1)..n as u32 {
+            for kind in 4..8 {
+                out.push(Cut { kind, i, j, k: 0 });
+            }
+            for k in (j + 1)..n as u32 {
+                for kind in 0..4 {
+                    out.push(Cut { kind, i, j, k });
+                }
+            }
+        }
+    }
+    out
+}
