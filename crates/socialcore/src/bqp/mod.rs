@@ -734,10 +734,17 @@ pub fn solve_bqp(problem: &BqpProblem, options: &BqpOptions) -> Result<BqpSoluti
     let (mut root_bound, node_sdp) = shift::choose_shift(&mut model, &clock, root_cut);
     model.node_sdp = node_sdp;
     crate::interrupt::check()?;
-    // Triangle cuts (Lagrangian) when the SDP bound does not close the root.
+    // Triangle cuts (Lagrangian) when the SDP bound does not close the root and `Q` is
+    // not positive semidefinite. On convex programs (Eq 4.12 is a least-squares cost) the
+    // plain trees are small and the cuts cost more than they save: measured on the
+    // articulated bench instances, 0.90 s CPU with cuts against 0.33 s without.
     let mut root_shift = model.s.clone();
     let mut root_cuts = Vec::new();
-    if node_sdp && root_bound < root_cut && !clock.out() {
+    let convex = || {
+        clock.remaining_secs() < 3.0 * shift::eig_seconds(n)
+            || shift::min_eigenvalue(&model, &model.qdiag).map_or(true, |l| l >= -model.margin)
+    };
+    if node_sdp && root_bound < root_cut && !clock.out() && !convex() {
         if let Some((cuts, _)) = triangles::strengthen(&model, &clock, best_f, root_bound) {
             let mut lm = triangles::lagrangian_model(&model, &cuts);
             let (b, sdp) = shift::choose_shift(&mut lm, &clock, root_cut);

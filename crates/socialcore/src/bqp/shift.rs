@@ -55,7 +55,7 @@ pub(crate) fn min_eigenvalue(model: &Model, d: &[f64]) -> Option<f64> {
 }
 
 /// Rough seconds for one dense eigenvalue decomposition of size `n` on a loaded machine.
-fn eig_seconds(n: usize) -> f64 {
+pub(crate) fn eig_seconds(n: usize) -> f64 {
     let n = n as f64;
     2e-8 * n * n * n + 1e-4
 }
