@@ -368,23 +368,23 @@ fn probe_beasley() {
 
 #[test]
 fn node_sdp_keeps_beasley_100_trees_small() {
-    // Beasley n = 100 (10 % density), seeds 3, 6, 9. Measured with the per-node SDP shift
-    // and the triangle cuts re-weighted at every node: 25, 37, 51 nodes (deterministic, any
-    // thread count); 185, 199, 319 before the cuts. Mutation runs: the root shift kept at
-    // every node (no node SDP) needs 3,479 nodes on seed 3; the ceilings leave about 2×
-    // margin.
-    let ceiling = [60u64, 80, 110];
-    for (k, seed) in [3u64, 6, 9].into_iter().enumerate() {
+    // Beasley n = 100 (10 % density), seeds 3, 6, 9, 10, 11. Measured with the per-node SDP
+    // shift and, after 2n = 200 plain nodes, the triangle cuts re-weighted at every node:
+    // see MEASURED (deterministic, any thread count); 185, 199, 319 nodes on seeds 3, 6, 9
+    // before the cuts (seeds 9 and 11 reach the cut phase). Mutation runs: the root shift
+    // kept at every node (no node SDP) needs 3,479 nodes on seed 3; the counts are
+    // deterministic, so the ceilings leave 1.2× margin (seed 9 without cuts: 319 > 296).
+    const MEASURED: [u64; 5] = [185, 199, 247, 171, 269];
+    let mut got = Vec::new();
+    for seed in [3u64, 6, 9, 10, 11] {
         let p = beasley(100, 0.1, seed);
         let sol = solve_bqp(&p, &BqpOptions::default()).expect("solves");
         eprintln!("seed {seed}: {} nodes, root {}", sol.nodes, sol.root_bound);
         assert!(sol.optimal, "seed {seed} not proven");
-        assert!(
-            sol.nodes <= ceiling[k],
-            "seed {seed}: {} nodes > {}",
-            sol.nodes,
-            ceiling[k]
-        );
+        got.push(sol.nodes);
+    }
+    for (k, (&g, &m)) in got.iter().zip(&MEASURED).enumerate() {
+        assert!(g <= m + m / 5, "instance {k}: {g} nodes > 1.2 x {m}");
     }
 }
 
