@@ -19,7 +19,9 @@
 //!   its box by projected Newton, warm-started from its parent; the bound is the Frank–Wolfe bound `φ(x) + Σ_i min(−g_i x_i,
 //!   g_i (1 − x_i))`, valid at any feasible `x`, so an inexact solve never gives an invalid
 //!   bound.
-//! * **Triangle cuts** ([`triangles`]): when the SDP bound does not close the root, the
+//! * **Triangle cuts** ([`triangles`]): when the SDP bound does not close the root, `Q` is
+//!   not positive semidefinite and the plain tree passes `2n` nodes (the search then
+//!   restarts from the root), the
 //!   triangle inequalities enter as Lagrangian terms `γ_t g_t(b) ≤ 0` added to `f` (still a
 //!   binary quadratic, below `f` on binary points), their multipliers fitted at the root
 //!   by subgradient ascent on the SDP bound with separation, and re-fitted at every node by
