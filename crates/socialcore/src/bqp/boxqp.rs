@@ -67,7 +67,7 @@ impl BoxQp {
         self.free.extend((0..n).filter(|&i| fix[i] == FREE));
         let m = self.free.len();
         // Constant and linear term of the reduced problem.
-        let mut constant = 0.0;
+        let mut constant = model.k0;
         // The shift of a fixed variable adds `s_i (x_i² − x_i) = 0`: only W and h matter.
         for i in 0..n {
             if fix[i] == 1 {

@@ -24,8 +24,8 @@ use rand_chacha::ChaCha8Rng;
 /// homogenising `z₀`), kept between solves as a warm start; fixed variables' rows are
 /// ignored and folded into the linear row.
 pub(crate) struct Mixing {
-    k: usize,
-    v: Vec<f64>,
+    pub(crate) k: usize,
+    pub(crate) v: Vec<f64>,
     g: Vec<f64>,
     /// `C_0i` of the current node (zero for fixed `i`).
     lin: Vec<f64>,

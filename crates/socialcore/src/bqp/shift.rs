@@ -40,7 +40,7 @@ fn root_bound(model: &Model, solver: &mut BoxQp, clock: &Clock) -> (f64, Vec<f64
 
 /// Smallest eigenvalue of `W + diag(d)`; `None` if the decomposition fails. Small
 /// matrices on one thread (nalgebra), large ones with faer.
-fn min_eigenvalue(model: &Model, d: &[f64]) -> Option<f64> {
+pub(crate) fn min_eigenvalue(model: &Model, d: &[f64]) -> Option<f64> {
     let n = model.n;
     if n <= SMALL {
         let mat =
@@ -55,7 +55,7 @@ fn min_eigenvalue(model: &Model, d: &[f64]) -> Option<f64> {
 }
 
 /// Rough seconds for one dense eigenvalue decomposition of size `n` on a loaded machine.
-fn eig_seconds(n: usize) -> f64 {
+pub(crate) fn eig_seconds(n: usize) -> f64 {
     let n = n as f64;
     2e-8 * n * n * n + 1e-4
 }

@@ -243,6 +243,7 @@ fn eigenvalue_root_bound(p: &BqpProblem) -> f64 {
         node_sdp: false,
         qdiag: vec![0.0; n],
         integral: true,
+        k0: 0.0,
     };
     let clock = Clock::new(None);
     let mut solver = boxqp::BoxQp::new(n);
@@ -367,22 +368,23 @@ fn probe_beasley() {
 
 #[test]
 fn node_sdp_keeps_beasley_100_trees_small() {
-    // Beasley n = 100 (10 % density), seeds 3, 6, 9. Measured with the per-node SDP shift:
-    // 185, 199, 319 nodes (deterministic, any thread count). Mutation run: the root shift
-    // kept at every node (no node SDP) needs 3,479 nodes on seed 3; the ceilings leave
-    // about 2× margin.
-    let ceiling = [400u64, 400, 650];
-    for (k, seed) in [3u64, 6, 9].into_iter().enumerate() {
+    // Beasley n = 100 (10 % density), seeds 3, 6, 9, 10, 11. Measured with the per-node SDP
+    // shift and, after 2n = 200 plain nodes, the triangle cuts re-weighted at every node:
+    // see MEASURED (deterministic, any thread count); 185, 199, 319 nodes on seeds 3, 6, 9
+    // before the cuts (seeds 9 and 11 reach the cut phase). Mutation runs: the root shift
+    // kept at every node (no node SDP) needs 3,479 nodes on seed 3; the counts are
+    // deterministic, so the ceilings leave 1.2× margin (seed 9 without cuts: 319 > 296).
+    const MEASURED: [u64; 5] = [185, 199, 247, 171, 269];
+    let mut got = Vec::new();
+    for seed in [3u64, 6, 9, 10, 11] {
         let p = beasley(100, 0.1, seed);
         let sol = solve_bqp(&p, &BqpOptions::default()).expect("solves");
         eprintln!("seed {seed}: {} nodes, root {}", sol.nodes, sol.root_bound);
         assert!(sol.optimal, "seed {seed} not proven");
-        assert!(
-            sol.nodes <= ceiling[k],
-            "seed {seed}: {} nodes > {}",
-            sol.nodes,
-            ceiling[k]
-        );
+        got.push(sol.nodes);
+    }
+    for (k, (&g, &m)) in got.iter().zip(&MEASURED).enumerate() {
+        assert!(g <= m + m / 5, "instance {k}: {g} nodes > 1.2 x {m}");
     }
 }
 
@@ -411,5 +413,84 @@ fn stopped_solves_bound_the_optimum_from_below() {
                 full.objective
             );
         }
+    }
+}
+
+/// The internal model of `p` (as `solve_bqp` builds it, shift zero).
+fn model_of(p: &BqpProblem) -> Model {
+    let n = p.n();
+    let (q, c) = p.coefficients();
+    let mut w = q.to_vec();
+    let mut h = c.to_vec();
+    for i in 0..n {
+        h[i] += w[i * n + i];
+        w[i * n + i] = 0.0;
+    }
+    let adj = (0..n)
+        .map(|i| {
+            (0..n)
+                .filter(|&j| w[i * n + j] != 0.0)
+                .map(|j| (j, w[i * n + j]))
+                .collect()
+        })
+        .collect();
+    Model {
+        n,
+        w,
+        h,
+        s: vec![0.0; n],
+        adj,
+        margin: 1e-7,
+        node_sdp: true,
+        qdiag: vec![0.0; n],
+        integral: false,
+        k0: 0.0,
+    }
+}
+
+#[test]
+fn lagrangian_objective_never_exceeds_f_on_binary_points() {
+    // f_γ = f + Σ γ_t g_t with every triangle and pair inequality and random γ ≥ 0: below f
+    // on every binary point (a sign or coefficient error in a cut makes it exceed f).
+    let n = 7;
+    let p = random_problem(n, false, 31);
+    let base = model_of(&p);
+    let mut rng = ChaCha8Rng::seed_from_u64(3);
+    let cuts: Vec<_> = triangles::all_cuts(n)
+        .into_iter()
+        .map(|c| (c, rng.random_range(0.0..2.0)))
+        .collect();
+    let lm = triangles::lagrangian_model(&base, &cuts);
+    let mut b = vec![false; n];
+    for mask in 0u32..(1 << n) {
+        for (i, bi) in b.iter_mut().enumerate() {
+            *bi = (mask >> i) & 1 == 1;
+        }
+        let (f, fg) = (base.f(&b), lm.f(&b) + lm.k0);
+        assert!(fg <= f + 1e-9, "f_γ {fg} > f {f} at {b:?}");
+    }
+}
+
+#[test]
+fn triangle_bound_is_valid_and_tighter_than_the_sdp_bound() {
+    // Beasley-like n = 18: the multipliers' root bound never exceeds the enumerated optimum
+    // and closes part of the gap left by the plain SDP/QCR bound (measured: see eprintln).
+    for seed in [300u64, 301, 302] {
+        let p = beasley(18, 0.3, seed);
+        let opt = enumerate(&p);
+        let mut model = model_of(&p);
+        let clock = Clock::new(None);
+        let (plain, _) = shift::choose_shift(&mut model, &clock, f64::INFINITY);
+        eprintln!("seed {seed}: opt {opt} sdp {plain:.2}");
+        assert!(plain <= opt + 1e-6);
+        let Some((_, bound)) = triangles::strengthen(&model, &clock, opt, plain) else {
+            panic!("seed {seed}: no multipliers beat the plain bound {plain} (opt {opt})");
+        };
+        eprintln!("seed {seed}: opt {opt} sdp {plain:.2} triangles {bound:.2}");
+        assert!(
+            bound <= opt + 1e-6,
+            "seed {seed}: bound {bound} > optimum {opt}"
+        );
+        assert!(bound > plain);
     }
 }
