@@ -74,8 +74,16 @@ def joint_attention(
     clock); ``to_truth(X (N, 3)) -> (N, 3)`` maps charge positions into the truth frame."""
     idx = {n: truth.names.index(n) for n in names if n in truth.names}
     at = {n: _truth_at(truth, v, times) for n, v in idx.items()}
+
+    def code_now(n: str, k: int) -> int | None:
+        """What ``n`` looks at at output time ``k`` (None: unknown, a wall or calibrating)."""
+        if n not in at or at[n][0][k] < 0:
+            return None
+        code = int(truth.target_of[idx[n]][at[n][0][k]])
+        return None if code in (AROUND, CALIBRATION) else code
+
     errors: list[float] = []
-    n_groups = n_found = 0
+    n_groups = n_found = n_charges = n_false = 0
     for k in range(len(times)):
         groups: dict[int, list[int]] = {}
         for i, n in enumerate(names):
@@ -88,6 +96,9 @@ def joint_attention(
             if code in (AROUND, CALIBRATION):
                 continue
             groups.setdefault(code, []).append(i)
+        pos = [
+            c.position[None] if to_truth is None else to_truth(c.position[None]) for c in charges[k]
+        ]
         for members in groups.values():
             if len(members) < 2:
                 continue
@@ -95,16 +106,23 @@ def joint_attention(
             first = names[members[0]]
             target = truth.regard[idx[first]][at[first][0][k]]
             best = np.inf
-            for c in charges[k]:
+            for i, c in enumerate(charges[k]):
                 if len(set(c.members.tolist()) & set(members)) < 2:
                     continue
-                x = c.position[None] if to_truth is None else to_truth(c.position[None])
-                best = min(best, float(np.linalg.norm(x[0] - target)))
+                best = min(best, float(np.linalg.norm(pos[i][0] - target)))
             if best <= radius:
                 n_found += 1
                 errors.append(best)
+        for c in charges[k]:  # false: no two members look at one thing (settled or not)
+            codes = [code_now(names[m], k) for m in c.members.tolist() if m < len(names)]
+            shared = [x for x in codes if x is not None and codes.count(x) >= 2]
+            n_charges += 1
+            n_false += not shared
     e = np.array(errors)
     return {
+        "charges": n_charges,
+        "false_charges": n_false,
+        "false_fraction": n_false / n_charges if n_charges else float("nan"),
         "groups": n_groups,
         "found": n_found,
         "found_fraction": n_found / n_groups if n_groups else float("nan"),
