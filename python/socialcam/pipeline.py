@@ -236,7 +236,13 @@ class RunOptions:
         gaze direction, Sec 6.2), else fall back
     max_pose_gap : a wearer's pose at an output time is interpolated between two posed
         frames at most this many frames apart, else the wearer is absent at that time
-    member_sigma, min_members, membership : social charges (:class:`socialcam.ChargeOptions`)
+    member_sigma, min_members, membership : social charges (:class:`socialcam.ChargeOptions`).
+        ``membership`` defaults to the thesis' rule ``"all"`` (a ray may count for several
+        charges): wearers' eyes are at one height, so nearly every two rays cross somewhere in
+        the room, and the exclusive rules (``"partition"``, ``"strongest"``) often hand a ray
+        of a two-wearer joint attention to such a crossing instead. On the true cameras of
+        rendered scenes (seeds 1-12, 454 frames × groups) joint attention is found in 92 % of
+        the frames with ``"all"``, 78 % with ``"partition"``, 73 % with ``"strongest"``.
     track_bandwidth, track_min_length : :func:`socialcam.track_charges`
     overlays : write one overlay video per wearer
     plots : write PNG plots
@@ -257,7 +263,7 @@ class RunOptions:
     max_pose_gap: float = 2.0
     member_sigma: float = 2.5
     min_members: int = 2
-    membership: str = "strongest"
+    membership: str = "all"
     track_bandwidth: float = 0.3
     track_min_length: int = 10
     overlays: bool = True
