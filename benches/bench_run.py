@@ -67,6 +67,7 @@ def main() -> None:
         rep = res.report
         print(f"\n=== seed {seed}: run {wall:.1f} s wall, {cpu:.1f} s CPU (loaded machine)")
         print("stages:", ", ".join(f"{k} {v['seconds']:.1f}s" for k, v in rep["stages"].items()))
+        print("CPU:", ", ".join(f"{k} {v['cpu_seconds']:.1f}s" for k, v in rep["stages"].items()))
         print("sfm:", ", ".join(f"{k} {v:.1f}s" for k, v in rep["sfm_timings"].items()))
         print(f"posed {rep['poses']['n_posed']}/{rep['poses']['n_frames']}")
         for which in ("calibration", "calibration_true_cameras"):

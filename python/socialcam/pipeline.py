@@ -828,8 +828,16 @@ def run(
     stages: dict[str, dict[str, Any]] = {}
     bar = tqdm(total=len(RUN_STAGES), desc="socialcam run", unit="stage", disable=not progress)
 
+    cpu_mark = [time.process_time()]  # CPU of this process, all threads (comparable under load)
+
     def done(stage: str, t0: float, cached: bool) -> None:
-        stages[stage] = {"seconds": time.perf_counter() - t0, "cached": cached}
+        now = time.process_time()
+        stages[stage] = {
+            "seconds": time.perf_counter() - t0,
+            "cpu_seconds": now - cpu_mark[0],
+            "cached": cached,
+        }
+        cpu_mark[0] = now
         bar.set_postfix_str(stage)
         bar.update(1)
 
