@@ -89,3 +89,22 @@ def test_joint_attention_is_found_where_wearers_look_together(results):
         assert ja["groups"] >= 20, (seed, ja)
         assert ja["found_fraction"] >= 0.88, (seed, ja)
         assert ja["error_median_m"] < 0.12, (seed, ja)
+
+
+def test_run_poses_at_its_output_rate(tmp_path, monkeypatch):
+    # `socialcam run --fps` sets the rate the videos are posed at (poses() has its own
+    # `fps` default, which run() once left at 10 Hz whatever its option said)
+    import socialcam.pipeline as pipeline
+
+    seen = {}
+
+    def fake(videos, **kw):
+        seen["fps"] = kw["options"].fps
+        raise ValueError("videos: stop here")
+
+    monkeypatch.setattr(pipeline, "reconstruct_videos", fake)
+    video = tmp_path / "a.mp4"
+    video.write_bytes(b"")
+    with pytest.raises(ValueError, match="stop here"):
+        pipeline.run([video], tmp_path / "out", fps=30.0, progress=False)
+    assert seen["fps"] == 30.0

@@ -861,6 +861,7 @@ def run(
         rec = poses(
             videos,
             out,
+            fps=opts.fps,
             sync=sync,
             intrinsics=intrinsics,
             known_distance=known_distance,
