@@ -362,5 +362,10 @@ def test_heads_turn_no_faster_than_people_do(seed):
     head = motion.head
     cos = np.clip((head[1:] * head[:-1]).sum(-1), -1.0, 1.0)
     rate = np.arccos(cos) * GRID_HZ  # rad/s
-    # 3.5 rad/s pursuit + the slow eye-in-head modulation (h ≤ 0.07, < 1 Hz)
-    assert rate.max() < 4.5, np.degrees(rate.max())
+    # 3.5 rad/s pursuit + the slow eye-in-head modulation (h ≤ 0.07, < 1 Hz). Not inside
+    # the calibration segments (and 0.3 s around them): there the deviation from the
+    # fixated point is 3-12 Hz jitter of spread h (render.CALIB_FAST), up to ~9 rad/s at
+    # h = 0.05, a modelling choice that keeps Eq 3.1 well posed (see the issue-10 notes).
+    t = motion.t[1:]
+    outside = (t < calib[0][0] - 0.3) | (t > calib[0][1] + 0.3)
+    assert rate[outside].max() < 4.5, np.degrees(rate[outside].max())

@@ -25,3 +25,21 @@ def test_shipped_scene_matches_its_truth():
             )
             assert vid.info.has_audio
     assert total < 10e6  # a few MB
+
+
+def test_shipped_scene_holds_calibration_and_joint_attention():
+    # what `socialcam demo` compares with the truth: every wearer's range-of-motion segment
+    # determines Eq 3.1 on the true cameras, and the truth holds joint attention that the
+    # charges find (measured on the true cameras: v ≤ 0.35°, 18 of 20 group-frames found)
+    from socialcam.pipeline import gaze_and_charges
+    from socialcam.synth.evaluate import _calibration_errors, joint_attention, truth_segments
+
+    truth = load_truth(shipped_scene())
+    names = list(truth.names)
+    assert len(truth.calibration) == len(names)
+    cams = {n: truth.cameras(i) for i, n in enumerate(names)}
+    cals, times, _frames, charges = gaze_and_charges(cams, names, calibration=truth_segments(truth))
+    for n, c in _calibration_errors(cals, truth, 1.0).items():
+        assert c["calibrated"] and c["v_error_deg"] < 0.5 and c["p_error_m"] < 0.02, (n, c)
+    ja = joint_attention(truth, names, times, charges)
+    assert ja["groups"] >= 20 and ja["found_fraction"] >= 0.8, ja

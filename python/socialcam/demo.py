@@ -283,6 +283,8 @@ def run_demo(
     out.mkdir(parents=True, exist_ok=True)
     report: dict[str, Any] = {"seed": seed, "stages": {}}
     for name in tqdm(chosen, desc="socialcam demo", disable=not progress, unit="stage"):
+        c0 = time.process_time()
         report["stages"][name] = STAGES[name](seed, out, plots)
+        report["stages"][name]["cpu_seconds"] = time.process_time() - c0
     write_json(out / "report.json", report)
     return report

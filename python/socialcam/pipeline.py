@@ -231,9 +231,18 @@ class RunOptions:
     max_v_std : degrees; a calibrated direction with a larger standard error is not
         determined by the segment: fall back
     max_p_std : metres; the same for the norm of the eye centre's standard errors
+    min_depth_change : the fixation distance must vary by at least this fraction of its
+        median during the segment (the back and forth that tells the eye offset from the
+        gaze direction, Sec 6.2), else fall back
     max_pose_gap : a wearer's pose at an output time is interpolated between two posed
         frames at most this many frames apart, else the wearer is absent at that time
-    member_sigma, min_members, membership : social charges (:class:`socialcam.ChargeOptions`)
+    member_sigma, min_members, membership : social charges (:class:`socialcam.ChargeOptions`).
+        ``membership`` defaults to the thesis' rule ``"all"`` (a ray may count for several
+        charges): wearers' eyes are at one height, so nearly every two rays cross somewhere in
+        the room, and the exclusive rules (``"partition"``, ``"strongest"``) often hand a ray
+        of a two-wearer joint attention to such a crossing instead. On the true cameras of
+        rendered scenes (seeds 1-12, 454 frames × groups) joint attention is found in 92 % of
+        the frames with ``"all"``, 78 % with ``"partition"``, 73 % with ``"strongest"``.
     track_bandwidth, track_min_length : :func:`socialcam.track_charges`
     overlays : write one overlay video per wearer
     plots : write PNG plots
@@ -249,11 +258,12 @@ class RunOptions:
     max_eye_offset: float = 0.25
     max_depth: float = 10.0
     max_v_std: float = 2.0
-    max_p_std: float = 0.05
+    max_p_std: float = 0.08
+    min_depth_change: float = 0.2
     max_pose_gap: float = 2.0
     member_sigma: float = 2.5
     min_members: int = 2
-    membership: str = "strongest"
+    membership: str = "all"
     track_bandwidth: float = 0.3
     track_min_length: int = 10
     overlays: bool = True
@@ -274,6 +284,7 @@ class RunOptions:
         check_float(self.max_depth, "max_depth", min=0.0, min_exclusive=True)
         check_float(self.max_v_std, "max_v_std", min=0.0, min_exclusive=True)
         check_float(self.max_p_std, "max_p_std", min=0.0, min_exclusive=True)
+        check_float(self.min_depth_change, "min_depth_change", min=0.0)
         check_float(self.max_pose_gap, "max_pose_gap", min=1.0)
         check_float(self.member_sigma, "member_sigma", min=0.0, min_exclusive=True)
         check_int(self.min_members, "min_members", min=1)
@@ -515,6 +526,12 @@ def _calibrate_one(
         why = (
             f"implausible eye centre ({unit * np.linalg.norm(cal.p):.2f} m from the camera > "
             f"max_eye_offset = {opts.max_eye_offset} m)"
+        )
+    elif np.ptp(depth) < opts.min_depth_change * float(np.median(depth)):
+        why = (
+            f"the fixation distance changed by {100 * np.ptp(depth) / np.median(depth):.0f} % "
+            f"only (< min_depth_change = {100 * opts.min_depth_change:g} %): move back and "
+            "forth towards the point, not only sideways"
         )
     elif unit * float(np.linalg.norm(cal.p_std)) > opts.max_p_std:
         why = (
@@ -811,8 +828,16 @@ def run(
     stages: dict[str, dict[str, Any]] = {}
     bar = tqdm(total=len(RUN_STAGES), desc="socialcam run", unit="stage", disable=not progress)
 
+    cpu_mark = [time.process_time()]  # CPU of this process, all threads (comparable under load)
+
     def done(stage: str, t0: float, cached: bool) -> None:
-        stages[stage] = {"seconds": time.perf_counter() - t0, "cached": cached}
+        now = time.process_time()
+        stages[stage] = {
+            "seconds": time.perf_counter() - t0,
+            "cpu_seconds": now - cpu_mark[0],
+            "cached": cached,
+        }
+        cpu_mark[0] = now
         bar.set_postfix_str(stage)
         bar.update(1)
 
@@ -836,6 +861,7 @@ def run(
         rec = poses(
             videos,
             out,
+            fps=opts.fps,
             sync=sync,
             intrinsics=intrinsics,
             known_distance=known_distance,

@@ -69,13 +69,28 @@ def joint_attention(
     *,
     radius: float = 0.5,
     settle: float = 0.6,
+    max_deviation: float = 3.0,
 ) -> dict[str, Any]:
     """Joint-attention figures of ``charges`` (ids index ``names``) at ``times`` (common
-    clock); ``to_truth(X (N, 3)) -> (N, 3)`` maps charge positions into the truth frame."""
+    clock); ``to_truth(X (N, 3)) -> (N, 3)`` maps charge positions into the truth frame.
+
+    A wearer looks at a target at a time when its truth says so for at least ``settle``
+    seconds and its head has turned there: the primary gaze is within ``max_deviation``
+    spreads ``h`` of the true gaze (Sec 3.1; beyond 3 h is a 1 % tail of the model, in
+    practice a head still turning towards the target). ``false_fraction``: the charges none
+    of whose two members look at one thing (settled or not)."""
     idx = {n: truth.names.index(n) for n in names if n in truth.names}
     at = {n: _truth_at(truth, v, times) for n, v in idx.items()}
+
+    def code_now(n: str, k: int) -> int | None:
+        """What ``n`` looks at at output time ``k`` (None: unknown, a wall or calibrating)."""
+        if n not in at or at[n][0][k] < 0:
+            return None
+        code = int(truth.target_of[idx[n]][at[n][0][k]])
+        return None if code in (AROUND, CALIBRATION) else code
+
     errors: list[float] = []
-    n_groups = n_found = 0
+    n_groups = n_found = n_charges = n_false = 0
     for k in range(len(times)):
         groups: dict[int, list[int]] = {}
         for i, n in enumerate(names):
@@ -84,10 +99,18 @@ def joint_attention(
             j, since = at[n][0][k], at[n][1][k]
             if j < 0 or not since >= settle:
                 continue
-            code = int(truth.target_of[idx[n]][j])
+            v = idx[n]
+            if _angle_deg(truth.gaze[v][j], truth.gaze_true[v][j]) > np.degrees(
+                np.arctan(max_deviation * truth.h[v])
+            ):
+                continue
+            code = int(truth.target_of[v][j])
             if code in (AROUND, CALIBRATION):
                 continue
             groups.setdefault(code, []).append(i)
+        pos = [
+            c.position[None] if to_truth is None else to_truth(c.position[None]) for c in charges[k]
+        ]
         for members in groups.values():
             if len(members) < 2:
                 continue
@@ -95,16 +118,23 @@ def joint_attention(
             first = names[members[0]]
             target = truth.regard[idx[first]][at[first][0][k]]
             best = np.inf
-            for c in charges[k]:
+            for i, c in enumerate(charges[k]):
                 if len(set(c.members.tolist()) & set(members)) < 2:
                     continue
-                x = c.position[None] if to_truth is None else to_truth(c.position[None])
-                best = min(best, float(np.linalg.norm(x[0] - target)))
+                best = min(best, float(np.linalg.norm(pos[i][0] - target)))
             if best <= radius:
                 n_found += 1
                 errors.append(best)
+        for c in charges[k]:  # false: no two members look at one thing (settled or not)
+            codes = [code_now(names[m], k) for m in c.members.tolist() if m < len(names)]
+            shared = [x for x in codes if x is not None and codes.count(x) >= 2]
+            n_charges += 1
+            n_false += not shared
     e = np.array(errors)
     return {
+        "charges": n_charges,
+        "false_charges": n_false,
+        "false_fraction": n_false / n_charges if n_charges else float("nan"),
         "groups": n_groups,
         "found": n_found,
         "found_fraction": n_found / n_groups if n_groups else float("nan"),
@@ -136,6 +166,7 @@ def run_vs_truth(
     reference: bool = True,
     radius: float = 0.5,
     settle: float = 0.6,
+    max_deviation: float = 3.0,
 ) -> dict[str, Any]:
     """Accuracy of a :class:`socialcam.pipeline.RunResult` against the rendered ``truth``
     (module docs). Returns a JSON-able dict: ``alignment``, ``calibration`` (per wearer
@@ -155,7 +186,14 @@ def run_vs_truth(
         "alignment": {"scale": s},
         "calibration": cal,
         "joint_attention": joint_attention(
-            truth, names, result.times, result.charges, to_truth, radius=radius, settle=settle
+            truth,
+            names,
+            result.times,
+            result.charges,
+            to_truth,
+            radius=radius,
+            settle=settle,
+            max_deviation=max_deviation,
         ),
     }
     if reference:
@@ -169,7 +207,9 @@ def run_vs_truth(
             options=opts,
         )
         out["calibration_true_cameras"] = _calibration_errors(cals, truth, 1.0)
-        ref = joint_attention(truth, names, times, charges, radius=radius, settle=settle)
+        ref = joint_attention(
+            truth, names, times, charges, radius=radius, settle=settle, max_deviation=max_deviation
+        )
         out["joint_attention_true_cameras"] = ref
         a, b = out["joint_attention"]["error_median_m"], ref["error_median_m"]
         out["error_ratio"] = a / b if b > 0 else float("nan")

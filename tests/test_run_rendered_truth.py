@@ -1,0 +1,110 @@
+"""Calibration and joint attention of ``socialcam run`` on the TRUE cameras of rendered
+4 wearers × 20 s scenes (the renderer's motion and truth, without drawing the frames): the
+range-of-motion segments of the renderer determine Eq 3.1 (thesis Sec 3.2.1), and the rays
+it calibrates meet where the wearers look together (Sec 6.2). The same stages through SfM
+poses are measured by ``benches/bench_run.py``."""
+
+from __future__ import annotations
+
+import numpy as np
+import pytest
+
+from socialcam.pipeline import gaze_and_charges
+from socialcam.synth import render
+from socialcam.synth.evaluate import _calibration_errors, joint_attention, truth_segments
+
+SEEDS = (1, 2, 3)
+
+
+def _truth_only(out, seed):
+    """The truth of ``render_scene(seed)`` at 4 × 20 s, 640×480 without encoding videos."""
+    orig = render._write_video
+    render._write_video = lambda *a, **k: None
+    try:
+        return render.render_scene(
+            out, n_wearers=4, duration=20.0, seed=seed, progress=False, audio=False
+        ).truth
+    finally:
+        render._write_video = orig
+
+
+@pytest.fixture(scope="module")
+def results(tmp_path_factory):
+    out = {}
+    for seed in SEEDS:
+        truth = _truth_only(tmp_path_factory.mktemp(f"truth{seed}"), seed)
+        names = list(truth.names)
+        cams = {n: truth.cameras(i) for i, n in enumerate(names)}
+        cals, times, _frames, charges = gaze_and_charges(
+            cams, names, calibration=truth_segments(truth)
+        )
+        out[seed] = (
+            truth,
+            _calibration_errors(cals, truth, 1.0),
+            joint_attention(truth, names, times, charges),
+        )
+    return out
+
+
+def test_range_of_motion_segments_are_well_posed(results):
+    for truth, _cal, _ja in results.values():
+        for v, (t0, t1, y) in enumerate(truth.calibration):
+            ft = truth.frame_times[v]
+            sel = (ft >= t0) & (ft <= t1)
+            # the wearer steps back and forth towards the point (depth varies by > 1.4×; measured
+            # 1.47-2.1 on seeds 1-3: the steps follow the pillar face normal, not the point) ...
+            depth = np.linalg.norm(y - truth.eyes[v][sel], axis=1)
+            assert depth.max() > 1.4 * depth.min() and depth.min() > 0.3
+            # ... and rolls the head about ±15° (the camera turns about the gaze ray)
+            tilt = np.degrees(np.arcsin(truth.R[v][sel][:, 0, 2]))  # image x axis vs level
+            assert np.ptp(tilt) > 20.0
+            # the primary gaze misses the point by the Sec 3.1 deviation of spread h
+            u = (y - truth.eyes[v][sel]) / depth[:, None]
+            dev = np.linalg.norm(np.cross(u, truth.gaze[v][sel]), axis=1)
+            assert 0.7 < np.sqrt(np.mean(dev**2) / 2) / truth.h[v] < 1.4
+
+
+def test_eq31_calibrates_every_rendered_wearer(results):
+    # the issue's targets: v within 0.5°, p within 2 cm, h within 20 %. Measured over seeds
+    # 1-20 (80 wearers): v ≤ 0.48° (median 0.12°), p ≤ 1.1 cm (median 0.2 cm), h ×0.94-1.15.
+    # Along the optical axis (no Eq 3.1) v is 4-12° off; a bias of 0.3° in v moves the median.
+    v_err = []
+    for seed, (_truth, cal, _ja) in results.items():
+        for n, c in cal.items():
+            assert c["calibrated"], (seed, n)
+            assert c["v_error_deg"] < 0.5, (seed, n, c)
+            assert c["p_error_m"] < 0.015, (seed, n, c)
+            assert 0.85 < c["h_ratio"] < 1.2, (seed, n, c)
+            v_err.append(c["v_error_deg"])
+    assert np.median(v_err) < 0.25, v_err
+
+
+def test_joint_attention_is_found_where_wearers_look_together(results):
+    # found: a charge of >= 2 of the group within 0.5 m of the target, in the frames where
+    # >= 2 wearers look at one target (settled for 0.6 s, head turned to within 3 h).
+    # Measured on seeds 1-12: 85-100 % (pooled 94 %; seeds 1-3: 92, 90, 96 %), median error
+    # 5-13 cm. Exclusive membership ("partition") finds 77 % on seed 3 and 47 % on seed 7;
+    # along the optical axis (no Eq 3.1) 35-49 %.
+    for seed, (_truth, _cal, ja) in results.items():
+        assert ja["groups"] >= 20, (seed, ja)
+        assert ja["found_fraction"] >= 0.88, (seed, ja)
+        assert ja["error_median_m"] < 0.12, (seed, ja)
+
+
+def test_run_poses_at_its_output_rate(tmp_path, monkeypatch):
+    # `socialcam run --fps` sets the rate the videos are posed at (poses() has its own
+    # `fps` default, which run() once left at 10 Hz whatever its option said)
+    import socialcam.pipeline as pipeline
+
+    seen = {}
+
+    def fake(videos, **kw):
+        seen["fps"] = kw["options"].fps
+        raise ValueError("videos: stop here")
+
+    monkeypatch.setattr(pipeline, "reconstruct_videos", fake)
+    video = tmp_path / "a.mp4"
+    video.write_bytes(b"")
+    with pytest.raises(ValueError, match="stop here"):
+        pipeline.run([video], tmp_path / "out", fps=30.0, progress=False)
+    assert seen["fps"] == 30.0
