@@ -19,26 +19,6 @@ import socialcam as sc
 from socialcam import synth
 
 
-def scores(scene: synth.SocialScene, charges: list[list[sc.Charge]]) -> tuple[float, float, float]:
-    """Right-count fraction, mean charge error and mean oracle error (metres); a marker
-    attended by a group but with no charge in its frame counts the room diagonal."""
-    truth = scene.n_charges()
-    right = np.mean([len(cs) == t for cs, t in zip(charges, truth, strict=True)])
-    orc = scene.oracle_intersections()
-    diag = float(np.linalg.norm(scene.room[1] - scene.room[0]))
-    err, oerr = [], []
-    for f, cs in enumerate(charges):
-        pos = np.array([c.position for c in cs]).reshape(-1, 3)
-        for t in range(scene.targets.shape[1]):
-            if np.isnan(orc[f, t, 0]):
-                continue
-            oerr.append(np.linalg.norm(orc[f, t] - scene.targets[f, t]))
-            err.append(
-                np.linalg.norm(pos - scene.targets[f, t], axis=1).min() if len(pos) else diag
-            )
-    return float(right), float(np.mean(err)), float(np.mean(oerr))
-
-
 def _seeds(text: str) -> list[int]:
     out: list[int] = []
     for part in text.split(","):
@@ -65,7 +45,7 @@ def main() -> None:
         t0 = time.process_time()
         charges = sc.find_charges_sequence(scene.ray_frames(), bounds=bounds, **over)
         cpu = time.process_time() - t0
-        right, err, oerr = scores(scene, charges)
+        right, err, oerr = scene.charge_scores(charges)
         m = scene.targets[0]
         dmin = min(np.linalg.norm(m[a] - m[b]) for a in range(len(m)) for b in range(a))
         moving = not np.allclose(scene.targets[0], scene.targets[-1])

@@ -362,24 +362,8 @@ def test_partition_does_not_depend_on_mean_shift_convergence():
 
 
 def _heldout_scores(scene, charges):
-    """Fraction of frames with the right number of charges, and mean errors of the charges
-    (nearest charge to each attended marker; the room diagonal if the frame has none) and
-    of the oracle intersection of the true groups."""
-    truth = scene.n_charges()
-    right = np.mean([len(cs) == t for cs, t in zip(charges, truth, strict=True)])
-    orc = scene.oracle_intersections()
-    diag = float(np.linalg.norm(scene.room[1] - scene.room[0]))
-    err, oerr = [], []
-    for f, cs in enumerate(charges):
-        pos = np.array([c.position for c in cs]).reshape(-1, 3)
-        for t in range(scene.targets.shape[1]):
-            if np.isnan(orc[f, t, 0]):
-                continue
-            oerr.append(np.linalg.norm(orc[f, t] - scene.targets[f, t]))
-            err.append(
-                np.linalg.norm(pos - scene.targets[f, t], axis=1).min() if len(pos) else diag
-            )
-    return float(right), float(np.mean(err)), float(np.mean(oerr))
+    """Right-count fraction, mean charge error and mean oracle error (``charge_scores``)."""
+    return scene.charge_scores(charges)
 
 
 def test_heldout_marker_scenes_beat_the_thesis_rule():
