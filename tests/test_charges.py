@@ -581,6 +581,16 @@ def test_plots_return_figures():
     tracks = sc.track_charges(sc.find_charges_sequence(scene.ray_frames()))
     fig2 = sc.plot_charge_tracks(tracks, times=scene.times, truth=scene.targets)
     assert len(fig2.axes) == 4
+    # The legend names the real tracks only (≥ legend_min_length charges) and the truth;
+    # the title is the figure's, above the panels.
+    raw = sc.track_charges(sc.find_charges_sequence(scene.ray_frames()), min_length=1)
+    fig3 = sc.plot_charge_tracks(raw, truth=scene.targets, legend_min_length=5)
+    (legend,) = fig3.legends
+    labels = [t.get_text() for t in legend.get_texts()]
+    real = [tr for tr in raw if len(tr) >= 5]
+    assert len(labels) == len(real) + 1 and labels[-1] == "true targets"
+    assert all(f"track {tr.id}:" in lab for tr, lab in zip(real, labels, strict=False))
+    assert fig3.get_suptitle().startswith(f"social charge tracks: {len(real)} of ≥ 5 frames")
     import matplotlib.pyplot as plt
 
     plt.close("all")
