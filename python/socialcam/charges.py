@@ -280,8 +280,10 @@ class ChargeOptions:
         rays (weights ``1/(s²h²)``, ``s`` the depth), not at a mode of the field; the set
         of charges is the partition of the rays with the highest likelihood minus an
         Occam cost per charge that scales with the bandwidths and distances (prior volume:
-        the ``bounds`` box, else a cube of side ``depth_range[1]``), found by hard EM from
-        the mean-shift modes; ``"strongest"`` — winner-take-all: a ray counts only for the
+        the ``bounds`` box, else a cube of side ``depth_range[1]``; in a sequence, see
+        ``pool_frames``) and the mixture weight ``(1 − unattended)/K`` of each attending
+        ray among ``K`` charges, found by hard EM from the mean-shift modes and the
+        near-intersections of ray pairs; ``"strongest"`` — winner-take-all: a ray counts only for the
         strongest mode it is within ``member_sigma`` of, and ``min_members`` applies to
         the rays still free; ``"all"`` — the thesis' rule (every mode with
         ``min_members`` rays within ``member_sigma``; a ray may count for several);
