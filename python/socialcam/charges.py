@@ -264,7 +264,8 @@ class ChargeOptions:
     seeds_per_ray : mean-shift seeds per ray, stratified in depth (Sec 6.2)
     depth_range : ``(min, max)`` depth of those seeds, metres from the eye
     pair_seeds : also seed at the near-intersection of every pair of rays passing within
-        ``member_sigma`` bandwidths of each other (narrow bandwidths make basins shorter
+        ``member_sigma`` bandwidths of each other (``"partition"``: and offer those points
+        as candidate charges) (narrow bandwidths make basins shorter
         than the spacing of the stratified seeds)
     tol : a climb has converged when a step moves less than ``tol`` metres
     newton : Newton / over-relaxed steps where they raise the field (fast on elongated

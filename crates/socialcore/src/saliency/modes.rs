@@ -717,7 +717,12 @@ fn charges_of_frame(
             let mut candidates = candidates;
             let mut extra: Vec<Charge> = Vec::new();
             let pooled = prior.terms.iter().map(|t| t.centre);
-            for x in pair_seeds(rays, opts).into_iter().chain(pooled) {
+            let pairs = if opts.pair_seeds {
+                pair_seeds(rays, opts)
+            } else {
+                Vec::new()
+            };
+            for x in pairs.into_iter().chain(pooled) {
                 let near = |c: &Charge| (c.position - x).norm() <= opts.merge_radius;
                 if candidates.iter().chain(extra.iter()).any(near) {
                     continue;
