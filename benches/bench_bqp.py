@@ -5,7 +5,7 @@ references; ours runs its parallel rounds on the rayon pool unless --serial).
 
 Instances: the Eq 4.12 programs of articulated reconstruction of real CMU walking motion
 (one camera per frame orbiting the subject at 1.5 m, 0.5 px noise) with n = 30, 60, 100
-frames; the OR-Library bqp50 instances (../shared/data/bqp when present, else the three in
+frames; the OR-Library bqp50 instances ($SOCIALCAM_DATA/bqp when set, else the three in
 tests/data/bqp); and Beasley-style random instances generated here (the OR-Library
 bqp100/bqp250 family: each upper-triangle entry nonzero with probability 10 %, integer
 uniform in [−100, 100], seeds 0, 1, …). Beasley *maximises* ``xᵀSx``; every solver here
@@ -18,6 +18,7 @@ Run: python benches/bench_bqp.py [--cap SECONDS] [--n100 10] [--n150 3] [--no-hi
 from __future__ import annotations
 
 import argparse
+import os
 import time
 from pathlib import Path
 
@@ -28,15 +29,8 @@ from socialcam.mocap import load_bvh
 from socialcam.synth.cameras import look_at
 
 ROOT = Path(__file__).resolve().parent.parent
-# ../shared/data from the main checkout (../../shared/data from a worktree), when present.
-SHARED = next(
-    (
-        p
-        for p in (ROOT.parent / "shared" / "data", ROOT.parent.parent / "shared" / "data")
-        if p.exists()
-    ),
-    ROOT / "missing",
-)
+# Extra data (a folder with ``mocap/`` and ``bqp/``) named by $SOCIALCAM_DATA, when set.
+SHARED = Path(os.environ.get("SOCIALCAM_DATA", str(ROOT / "missing")))
 
 
 def read_qubo(path: Path) -> np.ndarray:

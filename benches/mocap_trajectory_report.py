@@ -4,7 +4,7 @@ motion-capture trial in a folder (``*.bvh``, ``*.c3d``) is reconstructed from sy
 validation, refinement), and the mean relative error ``‖X − X̂‖ / ‖X‖`` per trial is printed
 (lab coordinates, metres, z up), with the RMS error in millimetres.
 
-    python benches/mocap_trajectory_report.py [--data ../shared/data/mocap] [--step 4]
+    python benches/mocap_trajectory_report.py [--data FOLDER_OF_BVH_OR_C3D] [--step 4]
 """
 
 from __future__ import annotations
@@ -72,8 +72,7 @@ def report(path: Path, step: int, k_max: int, seeds: list[int]) -> dict[str, obj
 
 def main() -> None:
     ap = argparse.ArgumentParser(description=__doc__)
-    here = Path(__file__).resolve().parent
-    ap.add_argument("--data", type=Path, default=here.parent.parent / "shared/data/mocap")
+    ap.add_argument("--data", type=Path, required=True, help="folder of *.bvh / *.c3d trials")
     ap.add_argument("--step", type=int, default=4, help="keep every n-th frame (120 → 30 Hz)")
     ap.add_argument("--k-max", type=int, default=80)
     ap.add_argument("--seeds", type=int, default=3, help="camera draws averaged per trial")

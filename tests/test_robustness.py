@@ -267,3 +267,23 @@ def test_written_files_respect_the_umask(tmp_path, mask):
         os.umask(old)
     assert mode == 0o666 & ~mask
     assert not list(path.parent.glob(".*.tmp"))  # no temp file left behind
+
+
+# ----------------------------------------------------------------------------- ConvergenceError
+
+
+def test_strict_raises_convergence_error_where_documented():
+    """``strict=True`` turns an iteration cap that was hit into the documented
+    :class:`socialcam.ConvergenceError` (a ``RuntimeError``), in both places that offer it."""
+    frames = gaze_frames(3)
+    with pytest.raises(sc.ConvergenceError, match="did not converge in max_iter=1"):
+        sc.GazeField.fit(frames, n_charges=2, max_iter=1, strict=True)
+    assert not sc.GazeField.fit(frames, n_charges=2, max_iter=1).converged.all()
+    cams = ring(6)
+    rng = np.random.default_rng(2)
+    X = rng.normal(scale=0.5, size=(20, 3))
+    x = np.ascontiguousarray(cams.project(X).transpose(1, 0, 2))
+    x = x + rng.normal(scale=2.0, size=x.shape)
+    with pytest.raises(sc.ConvergenceError):
+        sc.triangulate(x, cams, refine=True, max_iter=1, strict=True)
+    assert issubclass(sc.ConvergenceError, RuntimeError)

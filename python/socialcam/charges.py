@@ -264,7 +264,8 @@ class ChargeOptions:
     seeds_per_ray : mean-shift seeds per ray, stratified in depth (Sec 6.2)
     depth_range : ``(min, max)`` depth of those seeds, metres from the eye
     pair_seeds : also seed at the near-intersection of every pair of rays passing within
-        ``member_sigma`` bandwidths of each other (narrow bandwidths make basins shorter
+        ``member_sigma`` bandwidths of each other (``"partition"``: and offer those points
+        as candidate charges) (narrow bandwidths make basins shorter
         than the spacing of the stratified seeds)
     tol : a climb has converged when a step moves less than ``tol`` metres
     newton : Newton / over-relaxed steps where they raise the field (fast on elongated
@@ -280,8 +281,10 @@ class ChargeOptions:
         rays (weights ``1/(s²h²)``, ``s`` the depth), not at a mode of the field; the set
         of charges is the partition of the rays with the highest likelihood minus an
         Occam cost per charge that scales with the bandwidths and distances (prior volume:
-        the ``bounds`` box, else a cube of side ``depth_range[1]``), found by hard EM from
-        the mean-shift modes; ``"strongest"`` — winner-take-all: a ray counts only for the
+        the ``bounds`` box, else a cube of side ``depth_range[1]``; in a sequence, see
+        ``pool_frames``) and the mixture weight ``(1 − unattended)/K`` of each attending
+        ray among ``K`` charges, found by hard EM from the mean-shift modes and the
+        near-intersections of ray pairs; ``"strongest"`` — winner-take-all: a ray counts only for the
         strongest mode it is within ``member_sigma`` of, and ``min_members`` applies to
         the rays still free; ``"all"`` — the thesis' rule (every mode with
         ``min_members`` rays within ``member_sigma``; a ray may count for several);
@@ -294,6 +297,16 @@ class ChargeOptions:
         then points anywhere); in (0, 1)
     min_magnitude : charges with a weaker field value are rejected
     bounds : ``(lo, hi)`` (3,) corners of a box (a room) outside of which modes are rejected
+    pool_frames : ``"partition"`` in :func:`find_charges_sequence` only: pool evidence over
+        the ``pool_frames`` frames before and after each frame. A first pass finds every
+        frame's charges alone; a second pass gives each charge a position prior made of the
+        first pass's charges in those neighbouring frames (half of the prior mass; the other
+        half stays uniform over the prior volume, for a charge that is new) and adds their
+        positions as candidates. A charge seen near by in time then costs far less than a
+        new one, so static or slow targets are found in frames where the frame alone cannot
+        tell two close groups from one. ``0``: every frame alone (as :func:`find_charges`)
+    drift : how far a charge may move per frame (metres, standard deviation of a random
+        walk): a neighbour ``k`` frames away is widened by ``(drift·k)²`` per axis
     region_level : the confidence region is where the field exceeds this fraction of the
         charge's magnitude (Sec 6.2.1: 0.8)
     region_max_radius : cap on the region's semi-axes, metres
@@ -313,6 +326,8 @@ class ChargeOptions:
     unattended: float = 0.05
     min_magnitude: float = 0.0
     bounds: tuple[tuple[float, float, float], tuple[float, float, float]] | None = None
+    pool_frames: int = 10
+    drift: float = 0.05
     region_level: float = 0.8
     region_max_radius: float = 10.0
 
@@ -349,14 +364,16 @@ class ChargeOptions:
             if (bhi < blo).any():
                 raise ValueError(f"bounds: hi {bhi.tolist()} is below lo {blo.tolist()}")
             object.__setattr__(self, "bounds", (tuple(blo.tolist()), tuple(bhi.tolist())))
+        check_int(self.pool_frames, "pool_frames", min=0, max=1 << 31)
+        check_float(self.drift, "drift", min=0.0)
         check_float(self.region_level, "region_level", min=0.0, min_exclusive=True, max=1.0)
         if self.region_level >= 1.0:
             raise ValueError(f"region_level: expected a number < 1, got {self.region_level}")
         check_float(self.region_max_radius, "region_max_radius", min=0.0, min_exclusive=True)
         for name in ("tol", "merge_radius", "member_sigma", "charge_penalty", "unattended", "min_magnitude",
-                     "region_level", "region_max_radius"):  # fmt: skip
+                     "drift", "region_level", "region_max_radius"):  # fmt: skip
             object.__setattr__(self, name, float(getattr(self, name)))
-        for name in ("seeds_per_ray", "max_iter", "min_members"):
+        for name in ("seeds_per_ray", "max_iter", "min_members", "pool_frames"):
             object.__setattr__(self, name, int(getattr(self, name)))
 
     def to_dict(self) -> dict[str, Any]:
@@ -450,11 +467,16 @@ def find_charges_sequence(
     options: ChargeOptions | None = None,
     **overrides: Any,
 ) -> list[list[Charge]]:
-    """:func:`find_charges` on every frame in one parallel core call.
+    """:func:`find_charges` on every frame in one parallel core call, pooling evidence
+    over neighbouring frames.
 
-    Frame ``t`` of the result equals ``find_charges(frames[t], seed, ...)``; each
-    :class:`Charge` has ``frame = t``. ``options`` and ``overrides`` as for
-    :func:`find_charges`.
+    With ``membership="partition"`` (the default) and ``pool_frames > 0`` (default 10) a
+    second pass gives each frame's charges a position prior made of the charges found in
+    the ``pool_frames`` frames before and after it (see :class:`ChargeOptions`): static
+    or slow targets are then resolved in frames where the frame alone cannot tell two
+    close groups from one. With ``pool_frames=0`` (or another rule) frame ``t`` of the
+    result equals ``find_charges(frames[t], seed, ...)``. Each :class:`Charge` has
+    ``frame = t``. ``options`` and ``overrides`` as for :func:`find_charges`.
     """
     opts = _options(options, overrides)
     fr = [_rays(f) for f in frames]

@@ -48,7 +48,7 @@ class FaceDetections:
     ----------
     frame : (N,) index of the frame each face was found in (0-based, in input order)
     box : (N, 4) ``x, y, width, height`` in pixels (pixel (0, 0) is the centre of the
-        top-left pixel, DESIGN.md)
+        top-left pixel, the package's pixel convention)
     confidence : (N,) detector score in [0, 1]
     landmarks : (N, 5, 2) pixel coordinates in ``LANDMARKS`` order
     n_frames : number of frames searched

@@ -1,6 +1,6 @@
 """The video pipeline behind ``socialcam poses``: videos → synchronised camera poses.
 
-A run folder (DESIGN.md, "A run folder") receives ``poses.csv``, ``sync.json``,
+A run folder receives ``poses.csv``, ``sync.json``,
 ``report.json`` and ``cache/sfm`` (keyframes, COLMAP database and model, our npz/json).
 Every file is written atomically.
 """

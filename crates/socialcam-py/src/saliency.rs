@@ -119,6 +119,10 @@ pub struct PyChargeOptions {
     #[pyo3(attribute)]
     bounds: Option<([f64; 3], [f64; 3])>,
     #[pyo3(attribute)]
+    pool_frames: usize,
+    #[pyo3(attribute)]
+    drift: f64,
+    #[pyo3(attribute)]
     region_level: f64,
     #[pyo3(attribute)]
     region_max_radius: f64,
@@ -155,6 +159,8 @@ impl PyChargeOptions {
             bounds: self
                 .bounds
                 .map(|(lo, hi)| (Vector3::from(lo), Vector3::from(hi))),
+            pool_frames: self.pool_frames,
+            drift: self.drift,
             region_level: self.region_level,
             region_max_radius: self.region_max_radius,
         })

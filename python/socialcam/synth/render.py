@@ -92,7 +92,7 @@ class SceneTruth:
     start : (V,) true time of each video's first frame, s
     fps : nominal frame rate
     size : (width, height) in pixels
-    K : (V, 3, 3) intrinsics, pixel (0, 0) at the centre of the top-left pixel (DESIGN.md)
+    K : (V, 3, 3) intrinsics, pixel (0, 0) at the centre of the top-left pixel
     dist : per wearer ``{"model": "pinhole" | "radial" | "fisheye", "params": [...],
         "colmap_model": ..., "colmap_params": [...]}``. ``params`` are OpenCV
         coefficients: radial ``[k1, k2]`` (``cv2.projectPoints`` with ``(k1, k2, 0, 0)``),

@@ -22,6 +22,7 @@ bandwidth (the calibrated range of eye-in-head motion the field uses, Sec 3.2.1)
 
 from __future__ import annotations
 
+from collections.abc import Sequence
 from dataclasses import dataclass
 from typing import TYPE_CHECKING, Any
 
@@ -120,6 +121,28 @@ class SocialScene:
                 b = np.einsum("nij,nj->i", proj, self.eyes[f, sel])
                 out[f, t] = np.linalg.solve(a, b)
         return out
+
+    def charge_scores(self, charges: Sequence[Sequence[Any]]) -> tuple[float, float, float]:
+        """How well per-frame charges (``find_charges_sequence`` output: objects with a
+        ``position``) recover the attended targets: the fraction of frames with the right
+        number of charges (:meth:`n_charges`), the mean distance from each attended
+        target to its nearest charge (the room diagonal when the frame has none) and the
+        same mean for :meth:`oracle_intersections`, metres."""
+        truth = self.n_charges()
+        right = np.mean([len(cs) == t for cs, t in zip(charges, truth, strict=True)])
+        orc = self.oracle_intersections()
+        diag = float(np.linalg.norm(self.room[1] - self.room[0]))
+        err, oerr = [], []
+        for f, cs in enumerate(charges):
+            pos = np.array([c.position for c in cs]).reshape(-1, 3)
+            for t in range(self.targets.shape[1]):
+                if np.isnan(orc[f, t, 0]):
+                    continue
+                oerr.append(np.linalg.norm(orc[f, t] - self.targets[f, t]))
+                err.append(
+                    np.linalg.norm(pos - self.targets[f, t], axis=1).min() if len(pos) else diag
+                )
+        return float(right), float(np.mean(err)), float(np.mean(oerr))
 
     def to_dict(self) -> dict[str, Any]:
         out: dict[str, Any] = {"name": self.name}

@@ -2,6 +2,7 @@
 //! Eq 6.5–6.7 from seeds sampled along every gaze ray (Sec 6.2).
 
 use super::field::{ray_hessian, saliency, INV_SQRT_2PI, Q_CUTOFF};
+use super::partition::{Prior, PriorTerm};
 use super::GazeRays;
 use crate::error::{Error, Result};
 use nalgebra::{Matrix3, SymmetricEigen, Vector3};
@@ -55,6 +56,17 @@ pub struct ModeOptions {
     pub min_magnitude: f64,
     /// Optional box `(lo, hi)` outside of which modes are rejected (for example a room).
     pub bounds: Option<(Vector3<f64>, Vector3<f64>)>,
+    /// [`Membership::Partition`] in [`find_charges_sequence`] only: pool evidence over
+    /// the `pool_frames` frames before and after each frame. A first pass finds every
+    /// frame's charges alone; the second pass gives each charge of frame `t` a position
+    /// prior made of the first pass's charges of those neighbours (half the prior mass;
+    /// the other half stays uniform over the prior volume, for a charge that is new), and
+    /// their positions as extra candidates. `0`: every frame alone.
+    pub pool_frames: usize,
+    /// How far (metres) a charge may move per frame, as the standard deviation of a random
+    /// walk: a neighbour `k` frames away contributes with its uncertainty plus
+    /// `(drift·k)²` per axis.
+    pub drift: f64,
     /// The confidence region is where the field exceeds `region_level` times the mode
     /// value (Sec 6.2.1 uses 0.8).
     pub region_level: f64,
@@ -80,6 +92,8 @@ impl Default for ModeOptions {
             pair_seeds: true,
             min_magnitude: 0.0,
             bounds: None,
+            pool_frames: 10,
+            drift: 0.05,
             region_level: 0.8,
             region_max_radius: 10.0,
         }
@@ -150,6 +164,9 @@ impl ModeOptions {
             {
                 return bad("bounds", "must be finite with lo ≤ hi on every axis".into());
             }
+        }
+        if !(self.drift.is_finite() && self.drift >= 0.0) {
+            return bad("drift", format!("{} must be finite and ≥ 0", self.drift));
         }
         if !(self.region_level > 0.0 && self.region_level < 1.0) {
             return bad(
@@ -630,6 +647,7 @@ fn charges_of_frame(
     opts: &ModeOptions,
     seed: u64,
     parallel: bool,
+    prior: &Prior,
 ) -> Result<Vec<Charge>> {
     let mut seeds: Vec<Vector3<f64>> = (0..rays.len())
         .flat_map(|i| seeds_of_ray(rays, i, opts, seed))
@@ -693,7 +711,27 @@ fn charges_of_frame(
         }
         Membership::Cover => cover(rays, candidates, opts)?,
         Membership::Partition => {
-            let mut kept = super::partition::partition(rays, candidates, opts)?;
+            // The pairs' near-intersections are candidates too: a small group next to a
+            // larger one often has no mode of its own (the larger group's mode absorbs
+            // its climbs), yet the partition with it explains the rays better.
+            let mut candidates = candidates;
+            let mut extra: Vec<Charge> = Vec::new();
+            let pooled = prior.terms.iter().map(|t| t.centre);
+            let pairs = if opts.pair_seeds {
+                pair_seeds(rays, opts)
+            } else {
+                Vec::new()
+            };
+            for x in pairs.into_iter().chain(pooled) {
+                let near = |c: &Charge| (c.position - x).norm() <= opts.merge_radius;
+                if candidates.iter().chain(extra.iter()).any(near) {
+                    continue;
+                }
+                let value = saliency(rays, &x);
+                extra.extend(make_charge(rays, x, value, 0, opts));
+            }
+            candidates.extend(extra);
+            let mut kept = super::partition::partition(rays, candidates, opts, prior)?;
             kept.sort_by(|a, b| {
                 b.magnitude
                     .total_cmp(&a.magnitude)
@@ -873,11 +911,14 @@ pub(super) fn refresh_field_terms(rays: &GazeRays, ch: &mut Charge) {
 pub fn find_charges(rays: &GazeRays, opts: &ModeOptions, seed: u64) -> Result<Vec<Charge>> {
     opts.validate()?;
     check_seed_memory(rays.len(), opts)?;
-    charges_of_frame(rays, opts, seed, true)
+    charges_of_frame(rays, opts, seed, true, &Prior::default())
 }
 
-/// [`find_charges`] on every frame of a sequence, parallel over frames; frame `t` gives
-/// exactly what `find_charges(&frames[t], opts, seed)` gives.
+/// [`find_charges`] on every frame of a sequence, parallel over frames. With
+/// [`Membership::Partition`] and [`ModeOptions::pool_frames`] > 0, a second pass pools
+/// the first pass's charges of the neighbouring frames into each frame's position prior
+/// (see [`ModeOptions::pool_frames`]); otherwise frame `t` gives exactly what
+/// `find_charges(&frames[t], opts, seed)` gives.
 pub fn find_charges_sequence(
     frames: &[GazeRays],
     opts: &ModeOptions,
@@ -887,10 +928,64 @@ pub fn find_charges_sequence(
     let widest = frames.iter().map(GazeRays::len).max().unwrap_or(0);
     // Frames run in parallel: each worker holds one frame's seeds at a time.
     check_seed_memory(widest.saturating_mul(rayon::current_num_threads()), opts)?;
+    let alone = Prior::default();
+    let first: Vec<Vec<Charge>> = frames
+        .par_iter()
+        .map(|rays| charges_of_frame(rays, opts, seed, false, &alone))
+        .collect::<Result<_>>()?;
+    if opts.pool_frames == 0 || opts.membership != Membership::Partition {
+        return Ok(first);
+    }
+    // Each first-pass charge as (position, covariance of its position).
+    let found: Vec<Vec<(Vector3<f64>, Matrix3<f64>)>> = first
+        .iter()
+        .zip(frames)
+        .map(|(cs, rays)| {
+            cs.iter()
+                .filter_map(|c| {
+                    let info = super::partition::information(rays, &c.position, &c.members)?;
+                    Some((c.position, info.try_inverse()?))
+                })
+                .collect()
+        })
+        .collect();
     frames
         .par_iter()
-        .map(|rays| charges_of_frame(rays, opts, seed, false))
+        .enumerate()
+        .map(|(t, rays)| {
+            let prior = pooled_prior(&found, t, opts);
+            charges_of_frame(rays, opts, seed, false, &prior)
+        })
         .collect()
+}
+
+/// The position prior of frame `t`'s charges from the first-pass charges of the frames
+/// within `pool_frames` of it (not `t` itself): each neighbouring frame that has charges
+/// gets an equal share of the pooled half of the prior mass, split evenly among its
+/// charges.
+fn pooled_prior(
+    found: &[Vec<(Vector3<f64>, Matrix3<f64>)>],
+    t: usize,
+    opts: &ModeOptions,
+) -> Prior {
+    let lo = t.saturating_sub(opts.pool_frames);
+    let hi = (t + opts.pool_frames).min(found.len().saturating_sub(1));
+    let with: Vec<usize> = (lo..=hi)
+        .filter(|&k| k != t && !found[k].is_empty())
+        .collect();
+    let mut terms = Vec::new();
+    for &k in &with {
+        let lag = k.abs_diff(t) as f64 * opts.drift;
+        let weight = 0.5 / (with.len() * found[k].len()) as f64;
+        for (centre, cov) in &found[k] {
+            terms.push(PriorTerm {
+                centre: *centre,
+                cov: cov + Matrix3::identity() * (lag * lag),
+                weight,
+            });
+        }
+    }
+    Prior { terms }
 }
 
 /// The most memory the seeds and climbs of one call may take (2 GiB).

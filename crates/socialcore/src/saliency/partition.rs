@@ -4,15 +4,24 @@
 //!
 //! The model: a member of a charge at `x` misses it by a perspective distance `d` (Eq 6.2)
 //! drawn from `N(0, h² I₂)`; a ray that belongs to no charge points anywhere (uniform on
-//! the sphere). A ray therefore gains `ln(2/h²) − ½‖d/h‖²` (nats) by joining a charge
-//! instead of being left out. A charge costs the Occam factor of its position, uniform
+//! the sphere); a ray attends one of the `K` charges with prior `(1 − u)/K` (the mixture
+//! weights of the gaze model, Eq 7.7, taken equal). A ray therefore gains
+//! `ln(2/h²) + ln((1 − u)/u) − ln K − ½‖d/h‖²` (nats) by joining a charge instead of
+//! being left out: splitting a group costs every attending ray `ln((K+1)/K)`. A charge costs the Occam factor of its position, uniform
 //! over a prior volume `V` (the `bounds` box, else a cube of side `depth_max`):
 //! `ln V − 3/2 ln 2π + ½ ln det A`, with `A = Σᵢ (I − vᵢvᵢᵀ)/(sᵢ²hᵢ²)` the information
 //! of its members about `x` (Laplace approximation of the evidence). Both scale with the
 //! bandwidths and with the distances, so a pair of wide rays far away is accepted on the
 //! same terms as a tight group of six near by.
 //!
-//! The search starts from the modes of the mean-shift (Eq 6.7) and adds or removes one
+//! In a sequence ([`ModeOptions::pool_frames`](super::ModeOptions::pool_frames)) the
+//! uniform prior of a charge's position is replaced by a mixture: half of the mass stays
+//! uniform (a new charge), half sits on the charges the frame-by-frame pass found in the
+//! neighbouring frames, each a Gaussian of its own uncertainty plus a random-walk drift;
+//! the Laplace evidence then uses that density convolved with the members' posterior.
+//!
+//! The search starts from the modes of the mean-shift (Eq 6.7), the near-intersections
+//! of ray pairs and the pooled charges, and adds or removes one
 //! candidate at a time while the score grows. For a candidate set, hard EM runs to a
 //! fixed point: every ray goes to the charge where it gains most (or to none), a charge
 //! left with fewer than `min_members` rays is dropped, and every charge is re-estimated as
@@ -91,28 +100,90 @@ pub(super) fn intersection(
     Some(x)
 }
 
-/// Score of one charge at `x` with `members`: what the members gain over being left out
-/// minus the Occam cost of the charge (see the module docs).
-fn charge_score(
+/// One Gaussian term of a charge's position prior: a charge of a neighbouring frame
+/// ([`ModeOptions::pool_frames`]) at `centre` with covariance `cov` (its own uncertainty
+/// plus the drift allowed since), carrying prior mass `weight`.
+#[derive(Debug, Clone)]
+pub(super) struct PriorTerm {
+    pub centre: Vector3<f64>,
+    pub cov: Matrix3<f64>,
+    pub weight: f64,
+}
+
+/// The prior over the position of one charge: mass `uniform` spread evenly over the prior
+/// volume, the rest on the [`PriorTerm`]s. Without terms it is the uniform prior alone.
+#[derive(Debug, Clone, Default)]
+pub(super) struct Prior {
+    pub terms: Vec<PriorTerm>,
+}
+
+/// Share of the prior mass on "a charge that was not there in the neighbouring frames":
+/// a new charge and a persisting one are a priori equally likely.
+const NEW_CHARGE_MASS: f64 = 0.5;
+
+impl Prior {
+    /// `ln p(x)` of the Laplace evidence: the prior density convolved with the posterior
+    /// of the charge's members (information `info`), `ln[(u/V) + Σ w N(x; c, C + info⁻¹)]`,
+    /// with `u` = 1 when there are no terms.
+    fn ln_density(&self, x: &Vector3<f64>, info: &Matrix3<f64>, ln_volume: f64) -> f64 {
+        if self.terms.is_empty() {
+            return -ln_volume;
+        }
+        let post = info.try_inverse().unwrap_or_else(Matrix3::zeros);
+        let mut logs = vec![NEW_CHARGE_MASS.ln() - ln_volume];
+        for t in &self.terms {
+            let c = t.cov + post;
+            let (Some(chol), true) = (c.cholesky(), t.weight > 0.0) else {
+                continue;
+            };
+            let r = x - t.centre;
+            let m = r.dot(&chol.solve(&r));
+            let ln_det = 2.0 * chol.l().diagonal().iter().map(|d| d.ln()).sum::<f64>();
+            logs.push(t.weight.ln() - 0.5 * (m + ln_det) - 1.5 * std::f64::consts::TAU.ln());
+        }
+        let top = logs.iter().copied().fold(f64::NEG_INFINITY, f64::max);
+        top + logs.iter().map(|l| (l - top).exp()).sum::<f64>().ln()
+    }
+}
+
+/// The information `Σᵢ (I − vᵢvᵢᵀ)/(sᵢ²hᵢ²)` of rays `members` about a point `x`, `None`
+/// if `x` is behind one of their eyes.
+pub(super) fn information(
     rays: &GazeRays,
     x: &Vector3<f64>,
     members: &[usize],
-    occam0: f64,
-    prior: f64,
-) -> f64 {
-    let mut gain = 0.0;
+) -> Option<Matrix3<f64>> {
     let mut info = Matrix3::zeros();
     for &i in members {
         let v = &rays.v[i];
         let s = (x - rays.p[i]).dot(v);
-        gain += bonus(rays, i, prior) - 0.5 * q_of(rays, i, x);
+        if s <= 0.0 {
+            return None;
+        }
         info += (Matrix3::identity() - v * v.transpose()) * (rays.inv_h2[i] / (s * s));
     }
+    Some(info)
+}
+
+/// Score of one charge at `x` with `members`: what the members gain over being left out
+/// minus the Occam cost of the charge (see the module docs): `−ln p(x) − 3/2 ln 2π +
+/// ½ ln det A`, `p` the position prior.
+fn charge_score(search: &Search<'_>, x: &Vector3<f64>, members: &[usize], n_charges: usize) -> f64 {
+    let rays = search.rays;
+    let choice = (n_charges as f64).ln();
+    let gain: f64 = members
+        .iter()
+        .map(|&i| bonus(rays, i, search.prior) - choice - 0.5 * q_of(rays, i, x))
+        .sum();
+    let Some(info) = information(rays, x, members) else {
+        return f64::NEG_INFINITY;
+    };
     let det = info.determinant();
     if !(det > 0.0 && gain.is_finite()) {
         return f64::NEG_INFINITY;
     }
-    gain - occam0 - 0.5 * det.ln()
+    let ln_p = search.position_prior.ln_density(x, &info, search.ln_volume);
+    gain + ln_p + 1.5 * std::f64::consts::TAU.ln() - 0.5 * det.ln()
 }
 
 /// `ln(2/h²) + ln((1 − u)/u)` (`u` = [`ModeOptions::unattended`]): log posterior ratio of
@@ -134,10 +205,14 @@ struct State {
 struct Search<'a> {
     rays: &'a GazeRays,
     start: Vec<Vector3<f64>>,
+    /// The rays within `member_sigma` of each candidate (its own members).
+    claims: Vec<Vec<usize>>,
     opts: &'a ModeOptions,
-    occam0: f64,
+    /// `ln V` of the prior volume.
+    ln_volume: f64,
     /// `ln((1 − u)/u)`.
     prior: f64,
+    position_prior: &'a Prior,
 }
 
 impl Search<'_> {
@@ -147,8 +222,56 @@ impl Search<'_> {
         })
     }
 
-    /// Hard EM from the candidates `alive` to a fixed point, and its score.
+    /// Hard EM from the candidates `alive` twice, and the better of the two fixed
+    /// points: once with every ray first going where it fits best, once with every
+    /// candidate first claiming its own members, the candidates with fewer members first.
+    /// The first start lets a ray that fits two charges well leave a small group with too
+    /// few rays (which is then dropped), although the partition that keeps the small
+    /// group explains the rays better; the second start keeps it.
     fn evaluate(&self, alive: &[bool]) -> State {
+        let a = self.evaluate_from(alive, false);
+        let b = self.evaluate_from(alive, true);
+        if b.score > a.score {
+            b
+        } else {
+            a
+        }
+    }
+
+    /// The first assignment of [`Search::evaluate`]'s second start, over the charges `xs`.
+    fn claimed(&self, xs: &[(usize, Vector3<f64>)]) -> Vec<Option<usize>> {
+        let mut order: Vec<usize> = (0..xs.len()).collect();
+        order.sort_by_key(|&k| (self.claims[xs[k].0].len(), k));
+        let mut owner = vec![None; self.rays.len()];
+        for k in order {
+            for &i in &self.claims[xs[k].0] {
+                if owner[i].is_none() && q_of(self.rays, i, &xs[k].1).is_finite() {
+                    owner[i] = Some(k);
+                }
+            }
+        }
+        owner
+    }
+
+    /// Every ray to the charge of `xs` where it gains most, or to none.
+    fn assign(&self, xs: &[(usize, Vector3<f64>)]) -> Vec<Option<usize>> {
+        let rays = self.rays;
+        (0..rays.len())
+            .map(|i| {
+                let mut best: Option<(usize, f64)> = None;
+                let choice = (xs.len() as f64).ln();
+                for (k, (_, x)) in xs.iter().enumerate() {
+                    let l = bonus(rays, i, self.prior) - choice - 0.5 * q_of(rays, i, x);
+                    if l > 0.0 && best.map_or(true, |(_, b)| l > b) {
+                        best = Some((k, l));
+                    }
+                }
+                best.map(|(k, _)| k)
+            })
+            .collect()
+    }
+
+    fn evaluate_from(&self, alive: &[bool], claim: bool) -> State {
         let rays = self.rays;
         let n = rays.len();
         let mut xs: Vec<(usize, Vector3<f64>)> = (0..alive.len())
@@ -156,23 +279,16 @@ impl Search<'_> {
             .map(|c| (c, self.start[c]))
             .collect();
         let mut owner: Option<Vec<Option<usize>>> = None;
-        for _ in 0..EM_ITERATIONS {
+        for it in 0..EM_ITERATIONS {
             if xs.is_empty() {
                 owner = None;
                 break;
             }
-            let assign: Vec<Option<usize>> = (0..n)
-                .map(|i| {
-                    let mut best: Option<(usize, f64)> = None;
-                    for (k, (_, x)) in xs.iter().enumerate() {
-                        let l = bonus(rays, i, self.prior) - 0.5 * q_of(rays, i, x);
-                        if l > 0.0 && best.map_or(true, |(_, b)| l > b) {
-                            best = Some((k, l));
-                        }
-                    }
-                    best.map(|(k, _)| k)
-                })
-                .collect();
+            let assign: Vec<Option<usize>> = if claim && it == 0 {
+                self.claimed(&xs)
+            } else {
+                self.assign(&xs)
+            };
             let mut count = vec![0usize; xs.len()];
             assign.iter().flatten().for_each(|&k| count[k] += 1);
             // Drop the charge with the fewest rays (the first of them) and reassign.
@@ -221,7 +337,7 @@ impl Search<'_> {
         for (k, (_, x)) in xs.iter().enumerate() {
             let members: Vec<usize> = (0..n).filter(|&i| owner[i] == Some(k)).collect();
             if members.len() >= self.opts.min_members {
-                score += charge_score(rays, x, &members, self.occam0, self.prior);
+                score += charge_score(self, x, &members, xs.len());
             }
         }
         State {
@@ -239,6 +355,7 @@ pub(super) fn partition(
     rays: &GazeRays,
     candidates: Vec<Charge>,
     opts: &ModeOptions,
+    position_prior: &Prior,
 ) -> Result<Vec<Charge>> {
     let volume = match &opts.bounds {
         Some((lo, hi)) => (hi - lo).iter().map(|e| e.max(1e-3)).product::<f64>(),
@@ -247,9 +364,11 @@ pub(super) fn partition(
     let search = Search {
         rays,
         start: candidates.iter().map(|c| c.position).collect(),
+        claims: candidates.iter().map(|c| c.members.clone()).collect(),
         opts,
-        occam0: volume.ln() - 1.5 * std::f64::consts::TAU.ln(),
+        ln_volume: volume.ln(),
         prior: ((1.0 - opts.unattended) / opts.unattended).ln(),
+        position_prior,
     };
     let mut alive = vec![false; candidates.len()];
     let mut state = State {

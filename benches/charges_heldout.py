@@ -1,0 +1,72 @@
+"""Issue 13 held-out target of the social-charge rule on ``synth.marker_check_family``.
+
+Per scene: fraction of frames with the right number of charges, mean error of the charges
+against the markers divided by the mean error of the oracle intersection of the true
+groups, and the scene's parameters (people, markers, h, closest marker pair).
+
+    python benches/charges_heldout.py --seeds 100-119            # the held-out figures
+    python benches/charges_heldout.py --seeds 0-29 --sequence     # development seeds
+"""
+
+from __future__ import annotations
+
+import argparse
+import time
+
+import numpy as np
+
+import socialcam as sc
+from socialcam import synth
+
+
+def _seeds(text: str) -> list[int]:
+    out: list[int] = []
+    for part in text.split(","):
+        a, _, b = part.partition("-")
+        out += list(range(int(a), int(b or a) + 1))
+    return out
+
+
+def main() -> None:
+    ap = argparse.ArgumentParser(description=__doc__)
+    ap.add_argument("--seeds", default="0-29")
+    ap.add_argument("--frames", type=int, default=100)
+    ap.add_argument("--no-bounds", action="store_true")
+    ap.add_argument("--set", action="append", default=[], help="option=value (Python literal)")
+    args = ap.parse_args()
+    over = {}
+    for kv in args.set:
+        k, _, val = kv.partition("=")
+        over[k] = eval(val)
+    rows = []
+    for seed in _seeds(args.seeds):
+        scene = synth.marker_check_family(seed, n_frames=args.frames)
+        bounds = None if args.no_bounds else tuple(scene.room)
+        t0 = time.process_time()
+        charges = sc.find_charges_sequence(scene.ray_frames(), bounds=bounds, **over)
+        cpu = time.process_time() - t0
+        right, err, oerr = scene.charge_scores(charges)
+        m = scene.targets[0]
+        dmin = min(np.linalg.norm(m[a] - m[b]) for a in range(len(m)) for b in range(a))
+        moving = not np.allclose(scene.targets[0], scene.targets[-1])
+        rows.append((right, err / oerr))
+        print(f"seed {seed:3d}: P={scene.n_people:2d} T={m.shape[0]} h={scene.h[0]:.3f} "
+              f"room={scene.room[1][0]:4.1f}x{scene.room[1][1]:4.1f} dmin={dmin:4.2f} "
+              f"{'moving' if moving else 'static'}  right {right:.2f}  err/oracle "
+              f"{err / oerr:5.2f} (oracle {100 * oerr:5.1f} cm)  cpu {cpu:.1f}s"
+              + ("" if right >= 0.95 and err <= 1.25 * oerr else "   <- misses"))  # fmt: skip
+    r = np.array(rows)
+    print(
+        f"right count: mean {r[:, 0].mean():.3f} median {np.median(r[:, 0]):.3f} "
+        f"min {r[:, 0].min():.2f}; scenes >= 0.95: {(r[:, 0] >= 0.95).sum()}/{len(r)}"
+    )
+    print(
+        f"error/oracle: mean {r[:, 1].mean():.3f} median {np.median(r[:, 1]):.3f} "
+        f"max {r[:, 1].max():.2f}; scenes <= 1.25: {(r[:, 1] <= 1.25).sum()}/{len(r)}"
+    )
+    both = ((r[:, 0] >= 0.95) & (r[:, 1] <= 1.25)).sum()
+    print(f"both targets: {both}/{len(r)}")
+
+
+if __name__ == "__main__":
+    main()
