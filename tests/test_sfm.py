@@ -110,3 +110,19 @@ def test_world_up_from_head_cameras_that_look_down():
     fallback = _camera_up(narrow)
     expected = -narrow[:, 1, :].mean(axis=0)
     np.testing.assert_allclose(fallback, expected / np.linalg.norm(expected), atol=1e-12)
+
+
+def test_floor_is_found_despite_points_far_below_it():
+    """The floor is the densest layer of map points well below the cameras; a few badly
+    triangulated points metres below it (seen on a 4-s clip) must not hide it."""
+    from socialcam.sfm import _floor_height
+
+    rng = np.random.default_rng(2)
+    floor = np.c_[rng.uniform(-4, 4, (300, 2)), rng.normal(0.0, 0.03, 300)]
+    walls = np.c_[rng.uniform(-4, 4, (600, 2)), rng.uniform(0.0, 3.0, 600)]
+    outliers = np.c_[rng.uniform(-4, 4, (8, 2)), rng.uniform(-8.0, -5.0, 8)]
+    cams = rng.normal(1.7, 0.05, 100)
+    pts = np.concatenate([floor, walls, outliers])
+    assert abs(_floor_height(pts, cams, 0)) < 0.02
+    # too few points below the cameras: no floor rather than a guess
+    assert _floor_height(walls[walls[:, 2] > 1.0], cams, 0) is None

@@ -705,11 +705,14 @@ def _floor_height(points: FloatArray, cam_heights: FloatArray, seed: int) -> flo
     lowest_cam = float(np.min(cam_heights))
     spread = float(np.ptp(cam_heights)) + 1e-9
     h = points[:, 2]
-    below = h[h < lowest_cam - 0.5 * (np.median(cam_heights) - np.min(h))]
+    # the lowest map points, robustly: a few badly triangulated points far below the floor
+    # (seen: 6 m below on a 4-s clip) must not move the search window off the floor
+    low = float(np.percentile(h, 1.0))
+    below = h[(h < lowest_cam - 0.5 * (np.median(cam_heights) - low)) & (h >= low)]
     if len(below) < 30:
         return None
     # Densest thin slab (width 2 % of the camera-to-lowest-point range).
-    width = max(0.02 * (lowest_cam - float(np.min(h))), 1e-3 * spread)
+    width = max(0.02 * (lowest_cam - low), 1e-3 * spread)
     hs = np.sort(below)
     counts = np.searchsorted(hs, hs + width) - np.arange(len(hs))
     k = int(np.argmax(counts))
