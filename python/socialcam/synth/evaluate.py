@@ -30,6 +30,7 @@ from socialcam.geometry import align_similarity
 from socialcam.synth.render import AROUND, CALIBRATION, HEAD, SceneTruth
 
 __all__ = [
+    "ego_exo_disagreement",
     "face_joint_attention",
     "faces_vs_truth",
     "joint_attention",
@@ -433,3 +434,27 @@ def truth_detections(
         tc = truth.cameras(v)
         cams.append(Cameras(np.tile(K, (len(tc), 1, 1)), tc.R, tc.C, tc.times))
     return dets, cams
+
+
+def ego_exo_disagreement(truth: SceneTruth, faces: Any, owner: Mapping[int, int]) -> FloatArray:
+    """Per reconstructed face-instant of a wearer, the angle (degrees) between the exo gaze
+    (its face seen by the others) and the ego gaze (its head camera's primary gaze with the
+    true calibration), through :func:`socialcam.faces.fuse_ego_exo`: what a user sees when
+    checking an ego calibration against the faces."""
+    from socialcam.faces import fuse_ego_exo
+
+    V = len(truth.names)
+    ft = truth.frame_times[0] - truth.start[0]
+    out: list[float] = []
+    for j, own in owner.items():
+        if own >= V:
+            continue
+        ts = np.nonzero(np.isfinite(faces.v[:, j, 0]))[0]
+        if not len(ts):
+            continue
+        k = [int(np.argmin(np.abs(ft - faces.times[t]))) for t in ts]
+        _f, _kappa, dis = fuse_ego_exo(
+            truth.gaze[own][k], truth.h[own], faces.v[ts, j], faces.h[ts, j]
+        )
+        out += np.degrees(dis).tolist()
+    return np.array(out)
