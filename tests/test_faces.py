@@ -363,3 +363,37 @@ def test_fuse_ego_exo_reports_disagreement():
     np.testing.assert_allclose(ang, 0.05, atol=1e-9)
     with pytest.raises(ValueError, match="ego_h"):
         fuse_ego_exo(a, 0.0, b, 0.05)
+
+
+def test_photo_times_from_exif_and_given(tmp_path):
+    """Sec 5.3.2 input: capture times from EXIF DateTimeOriginal + SubSecTimeOriginal (+
+    OffsetTimeOriginal), or given; a photo without a time is an error naming the file."""
+    from PIL import Image
+
+    from socialcam.bodies import photo_times
+
+    def photo(name, stamp=None, sub=None, off=None):
+        im = Image.new("RGB", (8, 8))
+        ex = Image.Exif()
+        ifd = ex.get_ifd(0x8769)
+        for tag, val in ((0x9003, stamp), (0x9291, sub), (0x9011, off)):
+            if val is not None:
+                ifd[tag] = val
+        p = tmp_path / name
+        im.save(p, exif=ex)
+        return p
+
+    a = photo("a.jpg", "2026:12:01 12:00:00", "25")
+    b = photo("b.jpg", "2026:12:01 12:00:03", "5")
+    c = photo("c.jpg", "2026:12:01 13:00:01", "125", "+01:00")  # 12:00:01.125 UTC
+    np.testing.assert_allclose(photo_times([a, b, c]), [0.0, 3.25, 0.875])
+    bare = photo("bare.jpg")
+    with pytest.raises(ValueError, match=r"bare\.jpg.*DateTimeOriginal"):
+        photo_times([a, bare])
+    np.testing.assert_allclose(photo_times([a, bare], times=[1.0, 3.5]), [0.0, 2.5])
+    with pytest.raises(ValueError, match="every photo's time or none"):
+        photo_times([a, bare, b], times=[None, 3.5, None])
+    with pytest.raises(ValueError, match="times"):
+        photo_times([a], times=[1.0, 2.0])
+    with pytest.raises(ValueError, match="cannot read"):
+        photo_times([tmp_path / "missing.jpg"])
