@@ -452,7 +452,11 @@ def reconstruct_faces(
     ----------
     detections : per camera the :class:`FaceDetections` of its frames
     cameras : per camera its :class:`socialcam.Cameras` (one pose per frame, ``times`` on
-        the common clock; from ``socialcam.sfm`` or ground truth)
+        the common clock; from ``socialcam.sfm`` or ground truth). The world must be in
+        metres (``sfm.reconstruct_videos`` with ``known_distance`` or ``eye_height``): the
+        gates and the face-shape tests are in metres; in a map of arbitrary unit most faces
+        fail them (measured: 28 instead of 75 face-instants at scale 0.26). Pair each
+        camera with the detections of its posed frames (:meth:`FaceDetections.select`).
     anchors : the cameras are head cameras: camera ``v``'s wearer owns the face found near
         the projection of camera ``v``'s centre in the other views (Eq 3.2 (a)); without,
         every face goes through RANSAC
