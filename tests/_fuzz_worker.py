@@ -163,7 +163,7 @@ BASE: dict[str, tuple[list[Any], dict[str, Any]]] = {
     "face_triangulate": ([K, R, C, F_SLOT, F_LM, F_SIZE * 0.02, F_GROUP], {}),
     "face_refine_track": (
         [K, R, C, F_GROUP, F_SLOT, F_LM, F_SIZE * 0.02, X[None].copy(), 10.0, 3],
-        {},
+        {"lam_shape": 100.0},
     ),
     "face_gaze": ([X[None].copy(), np.full((1, 5), 0.01)], {}),
     "reconstruct_trajectories": (

@@ -199,6 +199,69 @@ def test_render_scene_face_truth(tmp_path):
         render_scene(tmp_path / "d", seed=5, n_people=-1, **kw)
 
 
+@pytest.fixture(scope="module")
+def circle(tmp_path_factory):
+    """A conversation circle (4 wearers + 3 people, 3 s, 10 fps) rendered small: the face
+    truth does not depend on the image size, detections come from the truth."""
+    return render_scene(tmp_path_factory.mktemp("circle"), n_wearers=4, n_people=3,
+                        duration=3.0, fps=10.0, size=(320, 240), seed=1, faces=True,
+                        arrangement="circle", audio=False, calibration=False,
+                        start_spread=0.0, progress=False).truth  # fmt: skip
+
+
+def test_circle_shows_faces_to_several_cameras(circle, tmp_path):
+    """The circle arrangement: faces are seen by ≥ 2 cameras at once far more often than in
+    the walking loop (measured on this seed: 34 % of the face-instants against 15 %; at
+    1280×960 counting faces ≥ 12 px, seeds 1–2: 37–39 % against 3–10 %), and the truth of what everyone looks at is consistent: a person whose code is
+    ``HEAD − q`` looks at person q's eye centre."""
+    from socialcam.synth.render import HEAD
+
+    def multi(t):
+        n = np.stack([t.face_visible[v] for v in range(len(t.names))]).sum(0)
+        return float((n >= 2).mean())
+
+    loop = render_scene(tmp_path / "loop", n_wearers=4, n_people=3, duration=3.0, fps=10.0,
+                        size=(320, 240), seed=1, faces=True, audio=False, calibration=False,
+                        start_spread=0.0, progress=False).truth  # fmt: skip
+    assert multi(circle) >= 0.25 and multi(circle) > 1.8 * multi(loop), (multi(circle), multi(loop))
+    code, reg = circle.face_target[0], circle.face_regard[0]
+    assert (code <= HEAD).all()
+    for v in range(4):  # wearers' eyes are known at the (shared) frame times
+        at_v = code == HEAD - v
+        np.testing.assert_allclose(
+            reg[at_v], np.broadcast_to(circle.eyes[v][:, None], reg.shape)[at_v]
+        )
+    with pytest.raises(ValueError, match="calibration"):
+        render_scene(tmp_path / "x", arrangement="circle", duration=0.2, size=(64, 48),
+                     progress=False, audio=False)  # fmt: skip
+    with pytest.raises(ValueError, match="arrangement"):
+        render_scene(tmp_path / "x", arrangement="square", duration=0.2, size=(64, 48),
+                     progress=False, audio=False, calibration=False)  # fmt: skip
+
+
+def test_circle_faces_from_truth_detections(circle):
+    """Eq 3.2–3.4 on the circle with detector-like landmarks (projected truth + 3 % of the
+    face size noise, at 1280×960 scale): measured association 1.0, landmark error 5.9 /
+    6.3 mm, gaze 5.8 / 5.1° (seeds 1 / 2, 6 s)."""
+    from socialcam.synth.evaluate import faces_vs_truth, truth_detections
+
+    dets, cams = truth_detections(circle, scale=4.0, seed=1)
+    f3 = reconstruct_faces(dets, cams)
+    import dataclasses
+
+    r = faces_vs_truth(dataclasses.replace(circle, K=np.stack([c.K[0] for c in cams])), dets, f3)
+    assert r["association"] >= 0.98 and r["false_surviving"] == 0
+    assert r["face_instants"] >= 40
+    assert r["landmark_mm"] < 10.0 and r["gaze_deg"] < 8.0, r
+    # ego/exo disagreement of the wearers (true calibration): the face gaze error plus the
+    # head pitch the rendered faces do not show; measured 6.4-8.5 deg median with MTCNN
+    # at 1280x960 (circle seeds 1-3)
+    from socialcam.synth.evaluate import ego_exo_disagreement
+
+    dis = ego_exo_disagreement(circle, f3, r["owner"])
+    assert len(dis) >= 10 and np.median(dis) < 12.0, dis
+
+
 def test_reconstruction_from_landmarks_meets_the_targets():
     """Eq 3.2–3.4 on exact cameras (at different heights) with 1 px landmark noise on
     30–45 px faces, five seeds. Measured (association of assigned detections, landmark
@@ -224,16 +287,34 @@ def test_gaze_rays_and_h():
 
 
 def test_temporal_refinement_reduces_the_error():
-    """Eq 3.4 (smoothness 5 mm per instant) lowers the landmark error of 2.5 px noisy
-    detections of slowly moving faces: measured 11.6 → 9.4 mm (seeds 0, 1, 3)."""
+    """Eq 3.4 (smoothness 0.075 m/s, 5 mm per instant at 15 fps) lowers the landmark error
+    of 2.5 px noisy detections of slowly moving faces: measured 11.6 → 9.4 mm (seeds 0, 1,
+    3)."""
     plain, smooth = [], []
     for s in (0, 1, 3):
         w = _World(s, noise=2.5)
         plain.append(_score(w, reconstruct_faces(w.dets, w.cams, anchors=False, smoothness=0))[2])
         smooth.append(
-            _score(w, reconstruct_faces(w.dets, w.cams, anchors=False, smoothness=0.005))[2]
+            _score(w, reconstruct_faces(w.dets, w.cams, anchors=False, smoothness=0.075))[2]
         )
     assert np.mean(smooth) < 0.9 * np.mean(plain), (smooth, plain)
+
+
+def test_turn_rate_smooths_the_face_configuration():
+    """The split temporal term (centre vs configuration, ``turn_rate``) lowers the gaze
+    error of slowly turning faces: measured median over seeds 0–4 4.9° (thesis' single λ)
+    → 2.8° (turn_rate 0.5 rad/s)."""
+    ws = [_World(s) for s in range(5)]
+    single = [_score(w, reconstruct_faces(w.dets, w.cams, anchors=False))[3] for w in ws]
+    split = [
+        _score(w, reconstruct_faces(w.dets, w.cams, anchors=False, turn_rate=0.5))[3] for w in ws
+    ]
+    assert np.median(split) < 0.75 * np.median(single), (split, single)
+    assert max(split) < 4.0, split
+    with pytest.raises(ValueError, match="turn_rate"):
+        reconstruct_faces(ws[0].dets, ws[0].cams, turn_rate=0.0)
+    with pytest.raises(ValueError, match="interocular"):
+        reconstruct_faces(ws[0].dets, ws[0].cams, interocular=(0.08, 0.05))
 
 
 def test_bad_input():
@@ -282,3 +363,37 @@ def test_fuse_ego_exo_reports_disagreement():
     np.testing.assert_allclose(ang, 0.05, atol=1e-9)
     with pytest.raises(ValueError, match="ego_h"):
         fuse_ego_exo(a, 0.0, b, 0.05)
+
+
+def test_photo_times_from_exif_and_given(tmp_path):
+    """Sec 5.3.2 input: capture times from EXIF DateTimeOriginal + SubSecTimeOriginal (+
+    OffsetTimeOriginal), or given; a photo without a time is an error naming the file."""
+    from PIL import Image
+
+    from socialcam.bodies import photo_times
+
+    def photo(name, stamp=None, sub=None, off=None):
+        im = Image.new("RGB", (8, 8))
+        ex = Image.Exif()
+        ifd = ex.get_ifd(0x8769)
+        for tag, val in ((0x9003, stamp), (0x9291, sub), (0x9011, off)):
+            if val is not None:
+                ifd[tag] = val
+        p = tmp_path / name
+        im.save(p, exif=ex)
+        return p
+
+    a = photo("a.jpg", "2026:12:01 12:00:00", "25")
+    b = photo("b.jpg", "2026:12:01 12:00:03", "5")
+    c = photo("c.jpg", "2026:12:01 13:00:01", "125", "+01:00")  # 12:00:01.125 UTC
+    np.testing.assert_allclose(photo_times([a, b, c]), [0.0, 3.25, 0.875])
+    bare = photo("bare.jpg")
+    with pytest.raises(ValueError, match=r"bare\.jpg.*DateTimeOriginal"):
+        photo_times([a, bare])
+    np.testing.assert_allclose(photo_times([a, bare], times=[1.0, 3.5]), [0.0, 2.5])
+    with pytest.raises(ValueError, match="every photo's time or none"):
+        photo_times([a, bare, b], times=[None, 3.5, None])
+    with pytest.raises(ValueError, match="times"):
+        photo_times([a], times=[1.0, 2.0])
+    with pytest.raises(ValueError, match="cannot read"):
+        photo_times([tmp_path / "missing.jpg"])

@@ -349,8 +349,10 @@ def face_refine_track(
     x0: npt.NDArray[np.float64],
     lam: float,
     iterations: int,
+    lam_shape: float | None = None,
 ) -> tuple[npt.NDArray[np.float64], npt.NDArray[np.float64]]:
-    """Eq 3.4 over one track of ``T`` instants → ``x (T,5,3)``, ``std (T,5)``."""
+    """Eq 3.4 over one track of ``T`` instants → ``x (T,5,3)``, ``std (T,5)``; ``lam``
+    weighs the motion of the face's centre, ``lam_shape`` (default ``lam``) its turning."""
 
 def face_gaze(
     x: npt.NDArray[np.float64], std: npt.NDArray[np.float64]

@@ -317,11 +317,12 @@ fn faces_of(
         .collect())
 }
 
-/// Eq 3.4 over one track of `T` instants → refined `x (T,5,3)` and `std (T,5)`.
+/// Eq 3.4 over one track of `T` instants → refined `x (T,5,3)` and `std (T,5)`; `lam`
+/// weighs the motion of the face's centre, `lam_shape` (default `lam`) its turning.
 /// Observations: `step (N,)` instant of each detection, `slot (N,)` its camera slot.
 #[pyfunction]
 #[allow(clippy::too_many_arguments)]
-#[pyo3(signature = (k, r, c, step, slot, landmarks, sigma, x0, lam, iterations))]
+#[pyo3(signature = (k, r, c, step, slot, landmarks, sigma, x0, lam, iterations, lam_shape=None))]
 fn face_refine_track<'py>(
     py: Python<'py>,
     k: PyReadonlyArray3<'py, f64>,
@@ -334,6 +335,7 @@ fn face_refine_track<'py>(
     x0: PyReadonlyArray3<'py, f64>,
     lam: f64,
     iterations: usize,
+    lam_shape: Option<f64>,
 ) -> PyResult<(Bound<'py, PyArray3<f64>>, Bound<'py, PyArray2<f64>>)> {
     let cams = cameras(&k, &r, &c)?;
     let dets = detections(&slot, &landmarks, &sigma, "sigma", cams.len())?;
@@ -345,7 +347,10 @@ fn face_refine_track<'py>(
         .map(|(d, &t)| (t, d.slot, d.landmarks, d.size))
         .collect();
     let iters = iterations.clamp(1, 100);
-    let (x, std) = detach(py, move || fc::refine_track(&cams, &obs, &init, lam, iters))?;
+    let lam_s = lam_shape.unwrap_or(lam);
+    let (x, std) = detach(py, move || {
+        fc::refine_track(&cams, &obs, &init, lam, lam_s, iters)
+    })?;
     let t_len = x.len();
     let mut xo = Array3::<f64>::zeros((t_len, N_LANDMARKS, 3));
     let mut so = Array2::<f64>::zeros((t_len, N_LANDMARKS));

@@ -413,22 +413,31 @@ pub fn triangulate_faces(
 
 /// Eq 3.4 over one track of `t_len` instants: `obs` are `(instant, camera, landmarks,
 /// sigma)`; `x0` the initial landmarks per instant (from Eq 3.3 or interpolated; every
-/// instant needs one). `lambda` weighs `Σ ‖X(t+1) − X(t)‖²` (1/m², the cost being in units
-/// of σ). Returns the refined landmarks and their standard deviations (metres, from the
-/// diagonal blocks of the normal matrix, so slightly pessimistic).
+/// instant needs one). The temporal term penalises the change of the face between
+/// consecutive instants, split into the motion of its centre (the landmarks' mean), weighed
+/// by `lam_centre`, and the change of its configuration about that centre (a turn of the
+/// head), weighed by `lam_shape` (1/m², the cost being in units of σ): `Σ_t dᵀ W d`,
+/// `d = X(t+1) − X(t)` over all landmarks, `W = lam_centre·A + lam_shape·(I − A)` with `A`
+/// the averaging projector. `lam_centre == lam_shape` is the thesis' `λ Σ ‖X(t+1) − X(t)‖²`.
+/// Returns the refined landmarks and their standard deviations (metres, from the diagonal
+/// blocks of the normal matrix, so slightly pessimistic).
 pub fn refine_track(
     cams: &[Camera],
     obs: &[(usize, usize, [Vector2<f64>; N_LANDMARKS], f64)],
     x0: &[[Vector3<f64>; N_LANDMARKS]],
-    lambda: f64,
+    lam_centre: f64,
+    lam_shape: f64,
     iterations: usize,
 ) -> Result<(Vec<Landmarks3>, Vec<[f64; N_LANDMARKS]>)> {
     let t_len = x0.len();
     if t_len == 0 {
         return Err(Error::invalid("x0", "an empty track"));
     }
-    if !(lambda.is_finite() && lambda >= 0.0) {
+    if !(lam_centre.is_finite() && lam_centre >= 0.0) {
         return Err(Error::invalid("lam", "must be finite and ≥ 0"));
+    }
+    if !(lam_shape.is_finite() && lam_shape >= 0.0) {
+        return Err(Error::invalid("lam_shape", "must be finite and ≥ 0"));
     }
     for &(t, s, _, sigma) in obs {
         if t >= t_len || s >= cams.len() {
@@ -449,20 +458,56 @@ pub fn refine_track(
         .flat_map(|f| f.iter().flat_map(|v| [v.x, v.y, v.z]))
         .collect();
     crate::error::ensure_finite("x0", &flat)?;
-    let mut x: Vec<[Vector3<f64>; N_LANDMARKS]> = x0.to_vec();
-    let mut std = vec![[f64::INFINITY; N_LANDMARKS]; t_len];
+    // W = lam_centre · A + lam_shape · (I − A), A = (J/5) ⊗ I₃
+    let mut w = Mat15::identity() * lam_shape;
+    let np = N_LANDMARKS as f64;
     for p in 0..N_LANDMARKS {
+        for q in 0..N_LANDMARKS {
+            for j in 0..3 {
+                w[(3 * p + j, 3 * q + j)] += (lam_centre - lam_shape) / np;
+            }
+        }
+    }
+    let mut x: Vec<Vec15> = x0
+        .iter()
+        .map(|f| Vec15::from_fn(|i, _| f[i / 3][i % 3]))
+        .collect();
+    // the shape part of W, for the robust (Cauchy) weights of the turns
+    let mut ws = Mat15::identity() * lam_shape;
+    for p in 0..N_LANDMARKS {
+        for q in 0..N_LANDMARKS {
+            for j in 0..3 {
+                ws[(3 * p + j, 3 * q + j)] -= lam_shape / np;
+            }
+        }
+    }
+    let wc = w - ws;
+    let mut diag = vec![Mat15::zeros(); t_len];
+    for it in 0..iterations.max(1) {
         crate::interrupt::check()?;
-        let mut xp: Vec<Vector3<f64>> = x.iter().map(|f| f[p]).collect();
-        let mut diag = vec![Matrix3::zeros(); t_len];
-        for _ in 0..iterations.max(1) {
-            // normal equations: diag blocks A_t, off-diagonal −λ I, rhs b_t
-            let mut a = vec![Matrix3::zeros(); t_len];
-            let mut b = vec![Vector3::zeros(); t_len];
-            for &(t, s, ref lms, sigma) in obs {
-                let c = &cams[s];
-                let kr = c.k * c.r;
-                let h = kr * (xp[t] - c.c);
+        // IRLS from the second iteration on (the first, fully smoothed solution is the
+        // start): a turn far beyond the expected rate is let through (Cauchy weight
+        // 1 / (1 + r²/c²)) instead of being smoothed away
+        let edges: Vec<Mat15> = (0..t_len.saturating_sub(1))
+            .map(|t| {
+                let d = x[t + 1] - x[t];
+                let r2 = d.dot(&(ws * d));
+                let wt = if it == 0 {
+                    1.0
+                } else {
+                    1.0 / (1.0 + r2 / ROBUST_C2)
+                };
+                wc + ws * wt
+            })
+            .collect();
+        let mut a = vec![Mat15::zeros(); t_len];
+        let mut b = vec![Vec15::zeros(); t_len];
+        for &(t, s, ref lms, sigma) in obs {
+            let c = &cams[s];
+            let kr = c.k * c.r;
+            for p in 0..N_LANDMARKS {
+                let xp = Vector3::new(x[t][3 * p], x[t][3 * p + 1], x[t][3 * p + 2]);
+                let h = kr * (xp - c.c);
                 if h.z <= 0.0 {
                     continue;
                 }
@@ -471,62 +516,85 @@ pub fn refine_track(
                 let ju = (kr.row(0) - pu * kr.row(2)) * iz / sigma;
                 let jv = (kr.row(1) - pv * kr.row(2)) * iz / sigma;
                 let (ru, rv) = ((pu - lms[p].x) / sigma, (pv - lms[p].y) / sigma);
-                a[t] += ju.transpose() * ju + jv.transpose() * jv;
-                b[t] -= ju.transpose() * ru + jv.transpose() * rv;
-            }
-            for t in 0..t_len {
-                let deg = (t > 0) as usize + (t + 1 < t_len) as usize;
-                a[t] += Matrix3::identity() * (lambda * deg as f64);
-                if t > 0 {
-                    b[t] -= (xp[t] - xp[t - 1]) * lambda;
+                let jtj = ju.transpose() * ju + jv.transpose() * jv;
+                let g = ju.transpose() * ru + jv.transpose() * rv;
+                for i in 0..3 {
+                    b[t][3 * p + i] -= g[i];
+                    for j in 0..3 {
+                        a[t][(3 * p + i, 3 * p + j)] += jtj[(i, j)];
+                    }
                 }
-                if t + 1 < t_len {
-                    b[t] -= (xp[t] - xp[t + 1]) * lambda;
-                }
-                a[t] += Matrix3::identity() * 1e-12;
-            }
-            diag.clone_from(&a);
-            let dx = solve_block_tridiagonal(&a, -lambda, &b)?;
-            let mut big = 0.0f64;
-            for t in 0..t_len {
-                xp[t] += dx[t];
-                big = big.max(dx[t].norm());
-            }
-            if big < 1e-9 {
-                break;
             }
         }
         for t in 0..t_len {
-            x[t][p] = xp[t];
-            std[t][p] = std_of(&diag[t]);
+            a[t] += Mat15::identity() * 1e-12;
+            if t > 0 {
+                a[t] += edges[t - 1];
+                b[t] -= edges[t - 1] * (x[t] - x[t - 1]);
+            }
+            if t + 1 < t_len {
+                a[t] += edges[t];
+                b[t] -= edges[t] * (x[t] - x[t + 1]);
+            }
+        }
+        diag.clone_from(&a);
+        let dx = solve_block_tridiagonal(&a, &edges, &b)?;
+        let mut big = 0.0f64;
+        for t in 0..t_len {
+            x[t] += dx[t];
+            big = big.max(dx[t].amax());
+        }
+        if big < 1e-9 {
+            break;
         }
     }
-    Ok((x, std))
+    let mut out = Vec::with_capacity(t_len);
+    let mut std = Vec::with_capacity(t_len);
+    for t in 0..t_len {
+        out.push(std::array::from_fn(|p| {
+            Vector3::new(x[t][3 * p], x[t][3 * p + 1], x[t][3 * p + 2])
+        }));
+        std.push(std::array::from_fn(|p| {
+            std_of(&diag[t].fixed_view::<3, 3>(3 * p, 3 * p).into_owned())
+        }));
+    }
+    Ok((out, std))
 }
 
-/// Solves the symmetric block-tridiagonal system with diagonal blocks `a` and
-/// off-diagonal blocks `off · I` (block Thomas algorithm).
-fn solve_block_tridiagonal(
-    a: &[Matrix3<f64>],
-    off: f64,
-    b: &[Vector3<f64>],
-) -> Result<Vec<Vector3<f64>>> {
+type Mat15 = nalgebra::SMatrix<f64, 15, 15>;
+type Vec15 = nalgebra::SVector<f64, 15>;
+
+/// Cauchy scale (squared) of the robust temporal term. A turn at the expected rate gives
+/// `r² ≈ 5` (five landmarks, each moved by about one expected step), so turns beyond about
+/// three times the expected rate are treated as real turns.
+const ROBUST_C2: f64 = 45.0;
+
+/// Solves the symmetric block-tridiagonal system with diagonal blocks `a` and off-diagonal
+/// blocks `−w[t]` between instants `t` and `t + 1` (block Thomas algorithm).
+fn solve_block_tridiagonal(a: &[Mat15], w: &[Mat15], b: &[Vec15]) -> Result<Vec<Vec15>> {
     let n = a.len();
-    let mut c_prime: Vec<Matrix3<f64>> = Vec::with_capacity(n);
-    let mut d_prime: Vec<Vector3<f64>> = Vec::with_capacity(n);
+    let mut c_prime: Vec<Mat15> = Vec::with_capacity(n);
+    let mut d_prime: Vec<Vec15> = Vec::with_capacity(n);
     for t in 0..n {
         let (m, rhs) = if t == 0 {
             (a[0], b[0])
         } else {
-            (a[t] - c_prime[t - 1] * off, b[t] - d_prime[t - 1] * off)
+            (
+                a[t] + w[t - 1] * c_prime[t - 1],
+                b[t] + w[t - 1] * d_prime[t - 1],
+            )
         };
         let inv = m.try_inverse().ok_or_else(|| {
             Error::degenerate("the track's normal equations are singular (too few views)")
         })?;
-        c_prime.push(inv * off);
+        c_prime.push(if t + 1 < n {
+            -(inv * w[t])
+        } else {
+            Mat15::zeros()
+        });
         d_prime.push(inv * rhs);
     }
-    let mut x = vec![Vector3::zeros(); n];
+    let mut x = vec![Vec15::zeros(); n];
     x[n - 1] = d_prime[n - 1];
     for t in (0..n - 1).rev() {
         x[t] = d_prime[t] - c_prime[t] * x[t + 1];
@@ -714,12 +782,12 @@ mod tests {
                 .sum::<f64>()
                 / t_len as f64
         };
-        let (xr, std) = refine_track(&cams, &obs, &x0, 1e4, 5).unwrap();
+        let (xr, std) = refine_track(&cams, &obs, &x0, 1e4, 1e4, 5).unwrap();
         assert!(err(&xr) < 0.7 * err(&x0), "{} vs {}", err(&xr), err(&x0));
         assert!(std
             .iter()
             .all(|s| s.iter().all(|v| v.is_finite() && *v > 0.0)));
-        let (x_same, _) = refine_track(&cams, &obs, &x0, 0.0, 5).unwrap();
+        let (x_same, _) = refine_track(&cams, &obs, &x0, 0.0, 0.0, 5).unwrap();
         assert!((err(&x_same) - err(&x0)).abs() < 1e-6);
     }
 }

@@ -27,9 +27,18 @@ import numpy as np
 from socialcam._validate import FloatArray
 from socialcam.charges import Charge
 from socialcam.geometry import align_similarity
-from socialcam.synth.render import AROUND, CALIBRATION, SceneTruth
+from socialcam.synth.render import AROUND, CALIBRATION, HEAD, SceneTruth
 
-__all__ = ["joint_attention", "run_vs_truth", "truth_segments"]
+__all__ = [
+    "ego_exo_disagreement",
+    "face_joint_attention",
+    "faces_vs_truth",
+    "joint_attention",
+    "match_faces",
+    "run_vs_truth",
+    "truth_detections",
+    "truth_segments",
+]
 
 
 def truth_segments(truth: SceneTruth) -> dict[str, tuple[float, float]]:
@@ -231,3 +240,261 @@ def _calibration_errors(
             "h_ratio": float(c.h / truth.h[v]),
         }
     return out
+
+
+# ----------------------------------------------------------------------------- faces
+def _project(K: FloatArray, R: FloatArray, C: FloatArray, X: FloatArray) -> tuple[Any, Any]:
+    Xc = np.einsum("ij,...j->...i", R, X - C)
+    return Xc[..., :2] / Xc[..., 2:] * np.diag(K)[:2] + K[:2, 2], Xc[..., 2]
+
+
+def match_faces(truth: SceneTruth, detections: Sequence[Any]) -> dict[str, Any]:
+    """Which true person each detection is (per camera ``(N_v,)``, −1 = false detection):
+    the person whose projected landmarks are nearest, within a quarter of the box; and the
+    detection rate of the faces the truth marks visible and at least 12 px."""
+    match, hit, visible, false = [], 0, 0, 0
+    for v, d in enumerate(detections):
+        K = truth.K[v]
+        m = np.full(len(d), -1)
+        for k in range(d.n_frames):
+            uv, z = _project(K, truth.R[v][k], truth.C[v][k], truth.face_landmarks[v][k])
+            ids = d.in_frame(k)
+            for i in ids:
+                e = np.linalg.norm(d.landmarks[i] - uv, axis=-1).mean(-1)
+                e[z.min(1) <= 0] = np.inf
+                e[v] = np.inf
+                p = int(np.argmin(e))
+                if e[p] < 0.25 * d.box[i, 2:].max():
+                    m[i] = p
+                else:
+                    false += 1
+            for q in np.nonzero(truth.face_visible[v][k] & (truth.face_size[v][k] >= 12))[0]:
+                visible += 1
+                hit += int(any(m[i] == q for i in ids))
+        match.append(m)
+    n_det = sum(len(d) for d in detections)
+    return {
+        "match": match,
+        "detected": hit / max(visible, 1),
+        "visible": visible,
+        "false_detections": false / max(n_det, 1),
+    }
+
+
+def faces_vs_truth(
+    truth: SceneTruth,
+    detections: Sequence[Any],
+    faces: Any,
+    to_truth: Any = None,
+    match: Mapping[str, Any] | None = None,
+) -> dict[str, Any]:
+    """Scores :func:`socialcam.faces.reconstruct_faces` against the rendered ``truth``
+    (faces at the frame times of wearer 0): detection (:func:`match_faces`), false
+    detections surviving association, association accuracy (each person column is owned
+    by its wearer, or by the true person most of its detections are), median 3D landmark
+    error (mm) and median angle between the face gaze and the true face normal (degrees),
+    per face-instant; ``to_truth(X (N, 3))`` maps reconstructed points into the truth
+    frame (for poses from SfM; the gaze directions are rotated alike). ``owner`` maps each
+    person column to the true person."""
+    V = len(truth.names)
+    m = dict(match) if match is not None else match_faces(truth, detections)
+    right = wrong = false = 0
+    err: list[float] = []
+    gerr: list[float] = []
+    owner: dict[int, int] = {}
+    ft = truth.frame_times[0] - truth.start[0]
+    for j, pid in enumerate(faces.person):
+        who = [
+            m["match"][v][i]
+            for v in range(V)
+            for i in np.nonzero(faces.detection_person[v] == j)[0]
+        ]
+        false += sum(w < 0 for w in who)
+        who = [w for w in who if w >= 0]
+        if not who:
+            continue
+        vals, cnt = np.unique(who, return_counts=True)
+        own = int(pid) if pid < V else int(vals[np.argmax(cnt)])
+        owner[j] = own
+        right += sum(w == own for w in who)
+        wrong += sum(w != own for w in who)
+        for t in np.nonzero(np.isfinite(faces.landmarks[:, j, 0, 0]))[0]:
+            k = int(np.argmin(np.abs(ft - faces.times[t])))
+            X, n = faces.landmarks[t, j], faces.v[t, j]
+            if to_truth is not None:
+                X, n = (
+                    to_truth(X),
+                    to_truth(X[:2].mean(0) + n[None])[0] - to_truth(X[:2].mean(0)[None])[0],
+                )
+            err.append(float(np.linalg.norm(X - truth.face_landmarks[0][k][own], axis=-1).mean()))
+            c = float(np.clip(n @ truth.face_normal[0][k][own] / np.linalg.norm(n), -1, 1))
+            gerr.append(float(np.degrees(np.arccos(c))))
+    n_det = sum(len(d) for d in detections)
+    return {
+        "detected": m["detected"],
+        "visible": m["visible"],
+        "false_surviving": false / max(n_det, 1),
+        "association": right / max(right + wrong, 1),
+        "assigned": (right + wrong) / max(n_det, 1),
+        "landmark_mm": 1000 * float(np.median(err)) if err else float("nan"),
+        "gaze_deg": float(np.median(gerr)) if gerr else float("nan"),
+        "face_instants": len(err),
+        "owner": owner,
+        "landmark_errors_m": np.array(err),
+        "gaze_errors_deg": np.array(gerr),
+    }
+
+
+def face_joint_attention(
+    truth: SceneTruth,
+    faces: Any,
+    owner: Mapping[int, int],
+    *,
+    settle: float = 0.6,
+    radius: float = 0.5,
+    seed: int = 0,
+    **charge_options: Any,
+) -> dict[str, Any]:
+    """Joint attention from gaze rays, against the truth of what everyone looks at: at
+    each instant of ``faces``, the groups of ≥ 2 people looking at the same person's head
+    for at least ``settle`` s. ``exo``: charges (:func:`socialcam.find_charges`) of the
+    rays of the reconstructed faces (people with and without a camera; ``owner`` maps the
+    person columns to true people, from :func:`faces_vs_truth`), over the groups with ≥ 2
+    members among them; ``ego``: charges of the wearers' true primary gaze rays (truth
+    camera poses and calibration, ``h`` the true eye-in-head spread), over the groups of
+    ≥ 2 wearers. A group is found when a charge holding ≥ 2 of its members lies within
+    ``radius`` of the looked-at eye centre; its error is that distance."""
+    from socialcam.charges import GazeRays, find_charges
+
+    V = len(truth.names)
+    W, D, H = truth.room["size"]
+    bounds = (np.array([-W / 2, -D / 2, 0.0]), np.array([W / 2, D / 2, H]))
+    ft = truth.frame_times[0] - truth.start[0]
+    codes = truth.face_target[0]  # (F, P)
+    since = np.zeros(codes.shape)
+    for k in range(1, len(codes)):
+        same = codes[k] == codes[k - 1]
+        since[k] = np.where(same, since[k - 1] + ft[k] - ft[k - 1], 0.0)
+
+    def score(rays: Any, members_ok: Any, k: int, out: dict[str, list[float]]) -> None:
+        groups: dict[int, list[int]] = {}
+        for p in members_ok:
+            if since[k, p] >= settle and codes[k, p] <= HEAD:
+                groups.setdefault(int(codes[k, p]), []).append(int(p))
+        charges = find_charges(rays, seed, bounds=bounds, **charge_options) if rays else []
+        for code, mem in groups.items():
+            if len(mem) < 2:
+                continue
+            target = truth.face_regard[0][k][mem[0]]
+            best = min(
+                (
+                    float(np.linalg.norm(c.position - target))
+                    for c in charges
+                    if len(set(c.members.tolist()) & set(mem)) >= 2
+                ),
+                default=np.inf,
+            )
+            out["groups"].append(code)
+            if best <= radius:
+                out["errors"].append(best)
+
+    exo: dict[str, list[float]] = {"groups": [], "errors": []}
+    ego: dict[str, list[float]] = {"groups": [], "errors": []}
+    for t in range(len(faces.times)):
+        k = int(np.argmin(np.abs(ft - faces.times[t])))
+        cols = [int(j) for j in np.nonzero(np.isfinite(faces.v[t, :, 0]))[0] if int(j) in owner]
+        if len(cols) >= 2:
+            ids = np.array([owner[j] for j in cols])
+            if len(np.unique(ids)) == len(ids):
+                rays = GazeRays(faces.p[t, cols], faces.v[t, cols], faces.h[t, cols], ids,
+                                normalize=True)  # fmt: skip
+                score(rays, ids, k, exo)
+        p = np.array([truth.eyes[v][k] for v in range(V)])
+        g = np.array([truth.gaze[v][k] for v in range(V)])
+        score(GazeRays(p, g, truth.h), range(V), k, ego)
+
+    def summary(d: dict[str, list[float]]) -> dict[str, float]:
+        e = np.array(d["errors"])
+        return {
+            "groups": len(d["groups"]),
+            "found_fraction": len(e) / len(d["groups"]) if d["groups"] else float("nan"),
+            "error_median_m": float(np.median(e)) if len(e) else float("nan"),
+        }
+
+    ex, eg = summary(exo), summary(ego)
+    return {"exo": ex, "ego": eg, "ratio": ex["error_median_m"] / eg["error_median_m"]}
+
+
+def truth_detections(
+    truth: SceneTruth,
+    *,
+    scale: float = 1.0,
+    noise: float = 0.03,
+    min_size: float = 12.0,
+    seed: int = 0,
+) -> tuple[list[Any], list[Any]]:
+    """Detector-like face detections made from the truth (no detector): per camera the
+    projected landmarks of every face the truth marks visible and at least ``min_size``
+    pixels, plus Gaussian noise of ``noise`` × the face size per coordinate (MTCNN's
+    landmark noise on rendered faces: ≈ 3 %), and the cameras they go with. ``scale``
+    pretends the images were ``scale`` times larger (K scaled; visibility is the same), so
+    a cheap low-resolution render stands in for a 1280×960 one. Returns ``(detections,
+    cameras)``."""
+    from socialcam.camera import Cameras
+    from socialcam.faces import FaceDetections
+
+    rng = np.random.default_rng(seed)
+    S = np.diag([scale, scale, 1.0])
+    dets, cams = [], []
+    for v in range(len(truth.names)):
+        K = S @ truth.K[v]
+        K[:2, 2] = (truth.K[v][:2, 2] + 0.5) * scale - 0.5
+        fr, lm, box = [], [], []
+        for k in range(len(truth.frame_times[v])):
+            ok = truth.face_visible[v][k] & (truth.face_size[v][k] * scale >= min_size)
+            for p in np.nonzero(ok)[0]:
+                uv, _ = _project(K, truth.R[v][k], truth.C[v][k], truth.face_landmarks[v][k][p])
+                size = float(truth.face_size[v][k][p] * scale)
+                uv = uv + noise * size * rng.normal(size=uv.shape)
+                fr.append(k)
+                lm.append(uv)
+                c = uv.mean(axis=0)
+                box.append([c[0] - size / 2, c[1] - size / 2, size, size])
+        w, h = truth.size
+        dets.append(
+            FaceDetections(
+                np.array(fr, np.int64),
+                np.array(box, float).reshape(-1, 4),
+                np.ones(len(fr)),
+                np.array(lm, float).reshape(-1, 5, 2),
+                len(truth.frame_times[v]),
+                (round(w * scale), round(h * scale)),
+            )
+        )
+        tc = truth.cameras(v)
+        cams.append(Cameras(np.tile(K, (len(tc), 1, 1)), tc.R, tc.C, tc.times))
+    return dets, cams
+
+
+def ego_exo_disagreement(truth: SceneTruth, faces: Any, owner: Mapping[int, int]) -> FloatArray:
+    """Per reconstructed face-instant of a wearer, the angle (degrees) between the exo gaze
+    (its face seen by the others) and the ego gaze (its head camera's primary gaze with the
+    true calibration), through :func:`socialcam.faces.fuse_ego_exo`: what a user sees when
+    checking an ego calibration against the faces."""
+    from socialcam.faces import fuse_ego_exo
+
+    V = len(truth.names)
+    ft = truth.frame_times[0] - truth.start[0]
+    out: list[float] = []
+    for j, own in owner.items():
+        if own >= V:
+            continue
+        ts = np.nonzero(np.isfinite(faces.v[:, j, 0]))[0]
+        if not len(ts):
+            continue
+        k = [int(np.argmin(np.abs(ft - faces.times[t]))) for t in ts]
+        _f, _kappa, dis = fuse_ego_exo(
+            truth.gaze[own][k], truth.h[own], faces.v[ts, j], faces.h[ts, j]
+        )
+        out += np.degrees(dis).tolist()
+    return np.array(out)

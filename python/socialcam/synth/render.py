@@ -111,7 +111,7 @@ class SceneTruth:
     regard : per wearer (F_v, 3) points of regard
     target_of : per wearer (F_v,) what is looked at: ``k ≥ 0`` moving target ``k``,
         ``-1`` a point on the walls, ``-2`` the calibration point, ``-10 - w`` the head of
-        wearer ``w``
+        person ``w`` (wearers ``0 … V - 1``, then the people without a camera)
     target_times : (T,) true times at which ``target_positions`` are sampled
     target_positions : (T, n_targets, 3) centres of the moving targets
     calibration : per wearer ``(t0, t1, point (3,))``, true clock
@@ -134,6 +134,11 @@ class SceneTruth:
         to the face unobstructed, not the viewer's own face
     face_size : per wearer ``(F_v, P)`` frontal face size in pixels, ``f · 0.13 m / depth``
         (the side of the box a detector draws around a frontal face)
+    face_regard : per wearer ``(F_v, P, 3)`` the point every person looks at (at that
+        wearer's frame times): the eye centre of the person looked at, or a point that
+        nobody else shares (code ``-1``)
+    face_target : per wearer ``(F_v, P)`` what every person looks at, codes as in
+        ``target_of`` (``-10 - q``: the head of person ``q``, wearers first)
     """
 
     names: tuple[str, ...]
@@ -167,6 +172,8 @@ class SceneTruth:
     face_normal: tuple[FloatArray, ...] = ()
     face_visible: tuple[npt.NDArray[np.bool_], ...] = ()
     face_size: tuple[FloatArray, ...] = ()
+    face_regard: tuple[FloatArray, ...] = ()
+    face_target: tuple[IntArray, ...] = ()
 
     @property
     def offsets(self) -> FloatArray:
@@ -206,13 +213,14 @@ class SceneTruth:
                 "k>=0": "moving target k",
                 str(AROUND): "a point on the walls",
                 str(CALIBRATION): "the calibration point",
-                f"{HEAD}-w": "the head of wearer w",
+                f"{HEAD}-w": "the head of person w (wearers first, then people)",
             },
         }
 
 
 _PER_WEARER = ("frame_times", "R", "C", "eyes", "gaze", "gaze_true", "regard", "target_of")
 _FACE_TRUTH = ("face_landmarks", "face_normal", "face_visible", "face_size")
+_FACE_TRUTH_OPT = ("face_regard", "face_target")  # absent from scenes rendered before
 
 
 def save_truth(truth: SceneTruth, path: str | Path) -> Path:
@@ -231,7 +239,7 @@ def save_truth(truth: SceneTruth, path: str | Path) -> Path:
         "clap_position": truth.clap_position,
         "meta": np.array(json.dumps(truth.to_dict())),
     }
-    for name in _PER_WEARER + _FACE_TRUTH:
+    for name in _PER_WEARER + _FACE_TRUTH + _FACE_TRUTH_OPT:
         for v, a in enumerate(getattr(truth, name)):
             arrays[f"{name}_{v}"] = a
     tmp = path.with_name(path.name + ".tmp.npz")
@@ -259,6 +267,11 @@ def load_truth(path: str | Path) -> SceneTruth:
         per = {name: tuple(z[f"{name}_{v}"] for v in range(V)) for name in _PER_WEARER}
         if meta.get("faces"):
             per |= {name: tuple(z[f"{name}_{v}"] for v in range(V)) for name in _FACE_TRUTH}
+            per |= {
+                name: tuple(z[f"{name}_{v}"] for v in range(V))
+                for name in _FACE_TRUTH_OPT
+                if f"{name}_0" in z
+            }
         return SceneTruth(
             names=tuple(meta["names"]),
             start=z["start"],
@@ -462,6 +475,8 @@ class _Motion:
     targets: Callable[[npt.ArrayLike], FloatArray]  # t (...,) -> (..., n_targets, 3)
     people_eyes: FloatArray | None = None  # (G, Q, 3) people without a camera
     people_head: FloatArray | None = None  # (G, Q, 3) their head directions (unit)
+    people_regard: FloatArray | None = None  # (G, Q, 3) what they look at
+    people_code: IntArray | None = None  # (G, Q) target codes of what they look at
 
     def at(self, name: str, t: npt.ArrayLike) -> FloatArray:
         """Linear interpolation of a grid quantity at times ``t`` (...,)."""
@@ -473,9 +488,10 @@ class _Motion:
         w = w.reshape(w.shape + (1,) * (arr.ndim - 1))
         return np.asarray((1 - w) * arr[i] + w * arr[i + 1])
 
-    def code_at(self, t: npt.ArrayLike) -> IntArray:
+    def code_at(self, t: npt.ArrayLike, name: str = "code") -> IntArray:
         x = np.round((np.asarray(t, dtype=np.float64) - self.t[0]) / (self.t[1] - self.t[0]))
-        return self.code[np.clip(x.astype(np.int64), 0, len(self.t) - 1)]
+        arr: IntArray = getattr(self, name)
+        return arr[np.clip(x.astype(np.int64), 0, len(self.t) - 1)]
 
 
 #: range of motion of a calibration segment (thesis Sec 3.2.1 and 6.2: "move back and forth
@@ -579,28 +595,7 @@ def _plan_motion(
     vel = np.gradient(eyes[:, :, :2], dt, axis=0)
     body_yaw = np.unwrap(np.arctan2(vel[..., 1], vel[..., 0]), axis=0)
     # --- moving targets: Lissajous paths around the pillar
-    tp = [
-        (
-            rng.uniform(0.55, 0.85),
-            rng.uniform(0.1, 0.25),
-            rng.uniform(0, 2 * np.pi),
-            rng.uniform(1.0, 1.9),
-            rng.uniform(0.1, 0.3),
-            rng.uniform(0.1, 0.4),
-        )
-        for _ in range(n_targets)
-    ]
-
-    def targets(tt: npt.ArrayLike) -> FloatArray:
-        ta = np.asarray(tt, dtype=np.float64)
-        out = np.empty((*ta.shape, n_targets, 3))
-        for k, (r, w, p0, zc, za, zf) in enumerate(tp):
-            a = p0 + w * 2 * np.pi * ta * (1 if k % 2 == 0 else -1)
-            out[..., k, 0] = r * np.cos(a)
-            out[..., k, 1] = r * np.sin(a)
-            out[..., k, 2] = zc + za * np.sin(2 * np.pi * zf * ta + p0)
-        return out
-
+    targets = _plan_targets(rng, n_targets)
     tg = targets(t)  # (G, T, 3)
     # --- what each wearer looks at: segments of 1–3 s
     code = np.empty((G, V), np.int64)
@@ -631,6 +626,60 @@ def _plan_motion(
             turn = (t >= c0 - CALIB_TURN) & (t < c1 + 0.3)
             code[turn, v] = CALIBRATION
             regard[turn, v] = calib_pts[v]
+    head, roll = _pursue(t, eyes, regard, code, h, rng, calib, rng_c)
+    return (
+        _Motion(t, eyes, head, regard, code, roll, body_yaw, targets),
+        calib_pts,
+    )
+
+
+def _plan_targets(rng: np.random.Generator, n_targets: int) -> Callable[..., FloatArray]:
+    """Moving targets: Lissajous paths around the central pillar, ``t (...,) -> (..., n, 3)``."""
+    tp = [
+        (
+            rng.uniform(0.55, 0.85),
+            rng.uniform(0.1, 0.25),
+            rng.uniform(0, 2 * np.pi),
+            rng.uniform(1.0, 1.9),
+            rng.uniform(0.1, 0.3),
+            rng.uniform(0.1, 0.4),
+        )
+        for _ in range(n_targets)
+    ]
+
+    def targets(tt: npt.ArrayLike) -> FloatArray:
+        ta = np.asarray(tt, dtype=np.float64)
+        out = np.empty((*ta.shape, n_targets, 3))
+        for k, (r, w, p0, zc, za, zf) in enumerate(tp):
+            a = p0 + w * 2 * np.pi * ta * (1 if k % 2 == 0 else -1)
+            out[..., k, 0] = r * np.cos(a)
+            out[..., k, 1] = r * np.sin(a)
+            out[..., k, 2] = zc + za * np.sin(2 * np.pi * zf * ta + p0)
+        return out
+
+    return targets
+
+
+def _pursue(
+    t: FloatArray,
+    eyes: FloatArray,
+    regard: FloatArray,
+    code: IntArray,
+    h: FloatArray,
+    rng: np.random.Generator,
+    calib: Sequence[tuple[float, float]] = (),
+    rng_c: np.random.Generator | None = None,
+) -> tuple[FloatArray, FloatArray]:
+    """Head directions ``(G, V, 3)`` and rolls ``(G, V)`` of people at ``eyes`` looking at
+    ``regard`` (what, ``code``): a rate-limited smooth pursuit of the true gaze after a change
+    of target (the head turns), tight tracking once the target is held, then the eye-in-head
+    offset of spread ``h[v]`` and a small roll. During person ``v``'s calibration segment
+    ``calib[v]`` (none for people past ``len(calib)``) the head holds the point and its
+    deviation is the fast jitter drawn from ``rng_c``."""
+    G, V = code.shape
+    dt = 1.0 / GRID_HZ
+    calib = [calib[v] if v < len(calib) else (-1.0, -1.0) for v in range(V)]
+    rng_c = rng if rng_c is None else rng_c
     u = regard - eyes
     u /= np.linalg.norm(u, axis=-1, keepdims=True)
     # --- head: rate-limited smooth pursuit of the true gaze after a change of target (the
@@ -680,10 +729,7 @@ def _plan_motion(
             roll[:, v] += fix1 * np.radians(CALIB_ROLL_DEG) * np.sin(2 * np.pi * f_roll * t + ph)
         hv = track[:, v] - m1[:, None] * e1[:, v] - m2[:, None] * e2[:, v]
         head[:, v] = hv / np.linalg.norm(hv, axis=-1, keepdims=True)
-    return (
-        _Motion(t, eyes, head, regard, code, roll, body_yaw, targets),
-        calib_pts,
-    )
+    return head, roll
 
 
 def _wall_point(room: Room, rng: np.random.Generator) -> FloatArray:
@@ -736,6 +782,8 @@ def _plan_people(room: Room, motion: _Motion, n_people: int, seed: int) -> None:
     theta = rng.uniform(0, 2 * np.pi) + 2 * np.pi * (np.arange(Q) + rng.uniform(-0.2, 0.2, Q)) / Q
     eyes = np.empty((G, Q, 3))
     head = np.empty((G, Q, 3))
+    regard = np.empty((G, Q, 3))
+    codes = np.empty((G, Q), np.int64)
     dt = t[1] - t[0]
     for q in range(Q):
         sx, sy = _smooth(rng, 3, 0.05, 0.2), _smooth(rng, 3, 0.05, 0.2)
@@ -748,7 +796,9 @@ def _plan_people(room: Room, motion: _Motion, n_people: int, seed: int) -> None:
             sl = slice(k, min(G, k + n))
             w = int(rng.integers(0, V + 1))
             look[sl] = motion.eyes[sl, w] if w < V else np.array([0.0, 0.0, base[2]])
+            codes[sl, q] = HEAD - w if w < V else AROUND
             k += n
+        regard[:, q] = look
         d = look - eyes[:, q]
         yaw = np.unwrap(np.arctan2(d[:, 1], d[:, 0]))
         a = 1 - np.exp(-dt / 0.3)
@@ -758,6 +808,85 @@ def _plan_people(room: Room, motion: _Motion, n_people: int, seed: int) -> None:
             y[g] = y[g - 1] + a * (yaw[g] - y[g - 1])
         head[:, q] = np.c_[np.cos(y), np.sin(y), np.zeros(G)]
     motion.people_eyes, motion.people_head = eyes, head
+    motion.people_regard, motion.people_code = regard, codes
+
+
+def _plan_circle(
+    room: Room,
+    n_wearers: int,
+    n_people: int,
+    t_end: float,
+    h: FloatArray,
+    rng: np.random.Generator,
+    n_targets: int,
+) -> _Motion:
+    """A conversation circle: the wearers and the people without a camera stand on a
+    circle (radius 1.0–1.4 m, larger for many people) in one half of the room, the central
+    pillar outside it, mixed in a random order, swaying a little, and look at each other's
+    heads. Every 2–5 s someone else speaks: the speaker looks at one listener after another
+    (1–2.5 s each); each listener looks at the speaker (75 %) or at someone else, with its
+    own reaction delay of 0–0.5 s. Heads follow by the pursuit of the walking scenes
+    (eye-in-head spread ``h`` for the wearers, 0.03–0.07 for the others)."""
+    dt = 1.0 / GRID_HZ
+    t = np.arange(-PRE_ROLL, t_end + 2 * dt, dt)
+    G, V, Q = len(t), n_wearers, n_people
+    P = V + Q
+    W, D, _H = room.size
+    side = 1.0 if rng.uniform() < 0.5 else -1.0
+    centre = np.array([side * W / 4, rng.uniform(-0.2, 0.2), 0.0])
+    radius = min(max(rng.uniform(1.0, 1.4), 0.1 * P), W / 4 - 0.5, D / 2 - 1.0)
+    theta = np.empty(P)
+    theta[rng.permutation(P)] = (
+        rng.uniform(0, 2 * np.pi) + 2 * np.pi * (np.arange(P) + rng.uniform(-0.2, 0.2, P)) / P
+    )
+    eyes = np.empty((G, P, 3))
+    for p in range(P):
+        sx, sy, sz = (_smooth(rng, 3, 0.05, 0.3) for _ in range(3))
+        base = centre + np.array(
+            [radius * np.cos(theta[p]), radius * np.sin(theta[p]), rng.uniform(1.55, 1.75)]
+        )
+        eyes[:, p] = base + np.c_[0.04 * sx(t), 0.04 * sy(t), 0.01 * sz(t)]
+    # who speaks when, and whom everyone looks at
+    code = np.empty((G, P), np.int64)
+    k, speaker = 0, int(rng.integers(0, P))
+    while k < G:
+        n = int(rng.uniform(2.0, 5.0) * GRID_HZ)
+        sl = slice(k, min(G, k + n))
+        for p in range(P):
+            others = [q for q in range(P) if q != p]
+            if p == speaker:
+                j = k
+                while j < sl.stop:
+                    m = int(rng.uniform(1.0, 2.5) * GRID_HZ)
+                    code[j : min(sl.stop, j + m), p] = HEAD - int(rng.choice(others))
+                    j += m
+            else:
+                code[sl, p] = HEAD - (speaker if rng.uniform() < 0.75 else int(rng.choice(others)))
+        k += n
+        speaker = int(rng.choice([q for q in range(P) if q != speaker] or [speaker]))
+    for p in range(P):  # reaction delays
+        lag = int(rng.uniform(0.0, 0.5) * GRID_HZ)
+        if lag:
+            code[lag:, p] = code[:-lag, p].copy()
+    regard = eyes[np.arange(G)[:, None], HEAD - code]
+    hh = np.r_[h, rng.uniform(0.03, 0.07, Q)]
+    head, roll = _pursue(t, eyes, regard, code, hh, rng)
+    to_c = centre[:2] - eyes[:, :V, :2]
+    body_yaw = np.arctan2(to_c[..., 1], to_c[..., 0])
+    return _Motion(
+        t,
+        eyes[:, :V],
+        head[:, :V],
+        regard[:, :V],
+        code[:, :V],
+        roll[:, :V],
+        body_yaw,
+        _plan_targets(rng, n_targets),
+        people_eyes=eyes[:, V:],
+        people_head=head[:, V:],
+        people_regard=regard[:, V:],
+        people_code=code[:, V:],
+    )
 
 
 def _persons(motion: _Motion, t: float) -> tuple[FloatArray, FloatArray]:
@@ -767,6 +896,22 @@ def _persons(motion: _Motion, t: float) -> tuple[FloatArray, FloatArray]:
         eyes = np.vstack([eyes, motion.at("people_eyes", t)])
         head = np.vstack([head, motion.at("people_head", t)])
     return eyes, head
+
+
+def _regard_of_all(motion: _Motion, times: FloatArray) -> FloatArray:
+    """What every person looks at ``(F, P, 3)`` at ``times`` (wearers, then people)."""
+    reg = motion.at("regard", times)
+    if motion.people_regard is not None:
+        reg = np.concatenate([reg, motion.at("people_regard", times)], axis=1)
+    return reg
+
+
+def _codes_of_all(motion: _Motion, times: FloatArray) -> IntArray:
+    """Target codes ``(F, P)`` of every person at ``times`` (wearers, then people)."""
+    code = motion.code_at(times)
+    if motion.people_code is not None:
+        code = np.concatenate([code, motion.code_at(times, "people_code")], axis=1)
+    return code
 
 
 def _head_centre(eye: FloatArray, head_dir: FloatArray) -> tuple[FloatArray, float]:
@@ -1230,6 +1375,7 @@ def render_scene(
     crf: int = 17,
     faces: bool = False,
     n_people: int = 0,
+    arrangement: str = "loop",
 ) -> RenderedScene:
     """Renders a scene of ``n_wearers`` head-mounted cameras (module docstring) into
     ``out_dir``: ``wearer<v>.mp4`` (H.264 + AAC, ``size = (width, height)``, ``fps``,
@@ -1244,7 +1390,10 @@ def render_scene(
     ``[0, start_spread]``); ``crf`` (x264 quality, lower = better); ``faces`` (a real face
     photograph on the front of every head, ``socialcam/data/faces``, with the 3D landmark
     truth ``face_*`` in :class:`SceneTruth`); ``n_people`` (people without a camera standing
-    around the wearers' loop and looking at wearers; drawn when ``bodies``).
+    around the wearers' loop and looking at wearers; drawn when ``bodies``);
+    ``arrangement``: ``"loop"`` (the wearers walk around the pillar, the module docstring)
+    or ``"circle"`` (everyone stands in a conversation circle and looks at each other's
+    heads, so that faces are seen by several cameras at once; no calibration segments).
 
     Deterministic: same arguments, same files.
     """
@@ -1266,6 +1415,9 @@ def render_scene(
         check_float(sound_speed, "sound_speed", min=1.0)
     crf_ = check_int(crf, "crf", min=0, max=51)
     Q = check_int(n_people, "n_people", min=0, max=12)
+    check_choice(arrangement, "arrangement", ("loop", "circle"))
+    if arrangement == "circle" and calibration:
+        raise ValueError("calibration: the circle arrangement has no calibration segments")
     if faces and head_textures is not None:
         raise ValueError("head_textures: give either head_textures or faces=True, not both")
     if (faces or Q) and not bodies:
@@ -1300,9 +1452,12 @@ def render_scene(
         for v in range(V)
     ]
     h = rng.uniform(*H_RANGE, V)
-    motion, calib_pts = _plan_motion(room, V, t_end, calib, h, rng, n_t)
-    if Q:
-        _plan_people(room, motion, Q, seed_)
+    if arrangement == "circle":
+        motion, calib_pts = _plan_circle(room, V, Q, t_end, h, rng, n_t), np.zeros((V, 3))
+    else:
+        motion, calib_pts = _plan_motion(room, V, t_end, calib, h, rng, n_t)
+        if Q:
+            _plan_people(room, motion, Q, seed_)
     # per-wearer lens and camera-to-head transform
     eye_offset = np.c_[
         rng.uniform(-0.01, 0.01, V), rng.uniform(0.06, 0.09, V), rng.uniform(-0.05, -0.02, V)
@@ -1365,7 +1520,7 @@ def render_scene(
     names = tuple(f"wearer{v}" for v in range(V))
     out.mkdir(parents=True, exist_ok=True)
     videos = []
-    truths: dict[str, list[Any]] = {k: [] for k in _PER_WEARER + _FACE_TRUTH}
+    truths: dict[str, list[Any]] = {k: [] for k in _PER_WEARER + _FACE_TRUTH + _FACE_TRUTH_OPT}
     total = V * F
     bar = None
     if progress:
@@ -1403,6 +1558,8 @@ def render_scene(
                 truths["face_normal"].append(n_v)
                 truths["face_visible"].append(face_vis)
                 truths["face_size"].append(face_px)
+                truths["face_regard"].append(_regard_of_all(motion, times))
+                truths["face_target"].append(_codes_of_all(motion, times))
             renderer = Renderer(K if Kr is None else Kr, rw, rh, tex)
             shell = renderer.prepare(room.planes[:N_SHELL], depth_test=False)
             static = renderer.prepare(room.planes[N_SHELL:])
