@@ -197,7 +197,8 @@ class VideoSfmOptions:
         up to ~0.4 m from that mean at 10 fps). Without a metric scale, 0.2 of the median
         keyframe-to-point depth stands for ``max_jump`` (and ``max_split`` in proportion).
     max_turn : likewise for rotation, radians (default 30°).
-    num_threads : threads for SIFT, matching and mapping.
+    num_threads : threads for SIFT, matching and mapping. COLMAP's results depend on thread
+        scheduling; with 1 thread the same inputs give bit-identical poses.
     seed : seeds the retrieval vocabulary, the mapper and RANSAC.
     """
 

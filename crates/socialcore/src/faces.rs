@@ -711,8 +711,8 @@ mod tests {
         let tri = triangulate_faces(&cams, &dets, &sig, &a.label, n).unwrap();
         for (i, l) in a.label.iter().enumerate() {
             let f = tri[l.unwrap()].unwrap();
-            for p in 0..5 {
-                assert!((f.x[p] - faces[truth[i]][p]).norm() < 1e-6);
+            for (x, t) in f.x.iter().zip(faces[truth[i]].iter()) {
+                assert!((x - t).norm() < 1e-6);
             }
             let (o, v, s) = gaze_from_landmarks(&f.x, &f.std).unwrap();
             assert!((v - Vector3::x()).norm() < 1e-6, "{v}");
