@@ -83,11 +83,9 @@ def scene(tmp_path_factory):
     )
 
 
-@pytest.fixture(scope="module")
-def posed(scene, tmp_path_factory, no_vocab_tree):
-    out = tmp_path_factory.mktemp("run")
-    kd = _known_distance(scene.truth)
-    rec = sc.poses(
+def _pose_scene(scene, out, kd):
+    """``socialcam.poses`` on the small scene, as the fixture and the cache test call it."""
+    return sc.poses(
         scene.videos,
         out,
         fps=10,
@@ -96,6 +94,13 @@ def posed(scene, tmp_path_factory, no_vocab_tree):
         progress=False,
         num_threads=NT,
     )
+
+
+@pytest.fixture(scope="module")
+def posed(scene, tmp_path_factory, no_vocab_tree):
+    out = tmp_path_factory.mktemp("run")
+    kd = _known_distance(scene.truth)
+    rec = _pose_scene(scene, out, kd)
     return out, rec, kd
 
 
@@ -242,15 +247,7 @@ def test_rerun_reloads_instead_of_recomputing(scene, posed, monkeypatch):
         raise AssertionError("recomputed")
 
     monkeypatch.setattr("socialcam.pipeline.reconstruct_videos", fail)
-    again = sc.poses(
-        scene.videos,
-        out,
-        fps=10,
-        sync=_manual(scene.truth),
-        known_distance=kd,
-        progress=False,
-        num_threads=NT,
-    )
+    again = _pose_scene(scene, out, kd)
     assert json.loads((out / "report.json").read_text())["cached"] is True
     for name in rec.names:
         np.testing.assert_array_equal(again.cameras[name].C, rec.cameras[name].C)
