@@ -182,8 +182,9 @@ class VideoSfmOptions:
     sequential_overlap : each keyframe is matched with this many following keyframes of
         the same video.
     cross_pairs : each keyframe is matched with its ``cross_pairs`` most similar keyframes in
-        each other video (more in short clips: ``MIN_CROSS_PAIRS`` per pair of videos) (retrieval by a TF-IDF bag of SIFT words computed here; the
-        vocabulary tree of COLMAP is never used).
+        each other video, more in short clips (at least ``MIN_CROSS_PAIRS`` per pair of
+        videos). Retrieval is by a TF-IDF bag of SIFT words computed here; the vocabulary
+        tree of COLMAP is never used.
     global_mapping : use COLMAP's global mapper instead of the incremental one.
     refine_intrinsics : with given ``intrinsics``, let bundle adjustment refine them.
     min_inliers : fewest PnP inliers for a pose of a frame between keyframes.
