@@ -238,6 +238,7 @@ def test_run_folder_files(scene, posed):
     os.umask(umask)
     assert mode == 0o666 & ~umask
     assert not [p for p in out.iterdir() if p.name.endswith(".tmp")]
+    assert not (out / "frames").exists()  # the grey-frame cache is removed after posing
 
 
 def test_rerun_reloads_instead_of_recomputing(scene, posed, monkeypatch):
@@ -378,9 +379,14 @@ class _CorruptFrames:
 
 
 @pytest.mark.filterwarnings("ignore::socialcam.sfm.VideoPosesWarning")
-def test_corrupt_frame_is_dropped_not_guessed(scene, tmp_path, monkeypatch, no_vocab_tree):
+@pytest.mark.parametrize("frame_cache", [True, False], ids=["cached", "decoded twice"])
+def test_corrupt_frame_is_dropped_not_guessed(
+    scene, tmp_path, monkeypatch, no_vocab_tree, frame_cache
+):
     from socialcam import video as video_mod
 
+    if not frame_cache:  # a scene too large for the grey-frame cache is decoded twice
+        monkeypatch.setattr(sfm, "FRAME_CACHE_BYTES", 0)
     real_open = video_mod.open_video
     bad = 12  # between keyframes 10 and 20 (at least one keyframe per second at 10 fps)
 
