@@ -994,7 +994,12 @@ def reconstruct_videos(
     sparse.mkdir()
     with _quiet(progress, "mapping keyframes"):
         models = _map(
-            db_path, kf_root, sparse, opts, fixed=bool(own_k) and not opts.refine_intrinsics
+            db_path,
+            kf_root,
+            sparse,
+            opts,
+            fixed=bool(own_k) and not opts.refine_intrinsics,
+            given=bool(own_k),
         )
     if not models:
         raise ValueError(
@@ -1355,7 +1360,13 @@ class _quiet:
 
 
 def _map(
-    db_path: Path, kf_root: Path, sparse: Path, opts: VideoSfmOptions, *, fixed: bool
+    db_path: Path,
+    kf_root: Path,
+    sparse: Path,
+    opts: VideoSfmOptions,
+    *,
+    fixed: bool,
+    given: bool = False,
 ) -> dict[int, Any]:
     import pycolmap
 
@@ -1386,8 +1397,10 @@ def _map(
     # adjustments without the points that add no new view: 40 % less mapping time on
     # video keyframes for the same keyframe reprojection error (measured on rendered
     # scenes; the frames between keyframes are posed by PnP afterwards anyway).
+    # Given intrinsics that are refined keep COLMAP's 5 global rounds: a wrong focal length
+    # moves back towards the truth only over several rounds (1 round left it 25 % off).
     inc.ba_local_max_refinements = 1
-    inc.ba_global_max_refinements = 1
+    inc.ba_global_max_refinements = 5 if given and not fixed else 1
     inc.mapper.ba_global_ignore_redundant_points3D = True
     if hasattr(inc, "random_seed"):
         inc.random_seed = opts.seed
