@@ -250,11 +250,11 @@ class RunOptions:
         social attention; wearers calibrating side by side on points a few decimetres
         apart made about half of all charges on rendered scenes (seeds 1-3, true cameras),
         none of them joint attention. ``gaze.csv`` keeps those rays either way.
-    min_charge_depth : metres; a charge nearer than this to the eye of one of its members
-        is dropped. Two rays cross somewhere in the room whatever their wearers look at,
-        often right in front of one of them; joint attention that close is rare. On the true
-        cameras of rendered scenes (seeds 1-3) 0.7 m drops a third of the charges whose
-        members look at different things and 4 % of the others.
+    min_charge_depth : metres; a ray is no member of a charge nearer than this to its eye
+        (a charge left with fewer than ``min_members`` is dropped). Two rays cross somewhere
+        in the room whatever their wearers look at, often right in front of one of them,
+        and a ray passes through its own eye: a wearer whose head others look at would be
+        a member of their charge. Joint attention that close to an eye is rare.
     member_sigma, min_members, membership : social charges (:class:`socialcam.ChargeOptions`).
         ``membership`` defaults to the thesis' rule ``"all"`` (a ray may count for several
         charges): wearers' eyes are at one height, so nearly every two rays cross somewhere in
@@ -282,7 +282,7 @@ class RunOptions:
     dense_calibration: bool = True
     max_pose_gap: float = 2.0
     charges_in_calibration: bool = False
-    min_charge_depth: float = 0.7
+    min_charge_depth: float = 0.5
     member_sigma: float = 2.5
     min_members: int = 2
     membership: str = "all"
@@ -1238,13 +1238,14 @@ def _find_charges(frames: Sequence[GazeRays | None], opts: RunOptions) -> list[l
     for k, cs in zip(present, found, strict=True):
         f = frames[k]
         assert f is not None
-        eye = dict(zip(f.ids.tolist(), f.p, strict=True))
-        charges[k] = [
-            replace(c, frame=k)
-            for c in cs
-            if min(np.linalg.norm(c.position - eye[m]) for m in c.members.tolist())
-            >= opts.min_charge_depth
-        ]
+        for c in cs:
+            # a ray passes through its own eye: it is no member of a charge right there
+            near = np.linalg.norm(c.position - f.p[c.member_index], axis=1) < opts.min_charge_depth
+            if len(c.members) - int(near.sum()) < opts.min_members:
+                continue
+            if near.any():
+                c = replace(c, members=c.members[~near], member_index=c.member_index[~near])
+            charges[k].append(replace(c, frame=k))
     return charges
 
 
