@@ -244,12 +244,12 @@ class RunOptions:
         ≤ 2 cm. Costs the tracking of the segments' frames only.
     max_pose_gap : a wearer's pose at an output time is interpolated between two posed
         frames at most this many frames apart, else the wearer is absent at that time
-    charges_in_calibration : let a wearer's rays inside its own calibration segment take
-        part in social charges (and the gaze field). Off by default: a range-of-motion
-        segment is the calibration protocol, the wearer fixating a calibration point, not
-        social attention; wearers calibrating side by side on points a few decimetres
-        apart made about half of all charges on rendered scenes (seeds 1-3, true cameras),
-        none of them joint attention. ``gaze.csv`` keeps those rays either way.
+    charges_in_calibration : let a calibrated wearer's rays inside its own calibration
+        segment take part in social charges (and the gaze field). Off by default: a
+        range-of-motion segment is the calibration protocol, the wearer fixating a
+        calibration point, not social attention; wearers calibrating side by side on points
+        a few decimetres apart made about half of all charges on rendered scenes (seeds
+        1-3, true cameras), none of them joint attention. ``gaze.csv`` keeps those rays.
     min_charge_depth : metres; a ray is no member of a charge nearer than this to its eye
         (a charge left with fewer than ``min_members`` is dropped). Two rays cross somewhere
         in the room whatever their wearers look at, often right in front of one of them,
@@ -984,7 +984,7 @@ def run(
         z = cache.read_npz("gaze.npz")
         times = z["times"]
         gaze = {n: (z[f"{n}.p"], z[f"{n}.v"], z[f"{n}.h"]) for n in names if f"{n}.p" in z}
-        frames = _frames(names, _social(gaze, times, segments, opts))
+        frames = _frames(names, _social(gaze, times, segments, calibrations, opts))
         done("gaze", t0, cached)
 
         # ---------------------------------------------------------------- charges
@@ -1200,7 +1200,7 @@ def gaze_and_charges(
         for n in names
         if f"{n}.p" in arrays
     }
-    frames = _frames(names, _social(gaze, arrays["times"], segments, opts))
+    frames = _frames(names, _social(gaze, arrays["times"], segments, cals, opts))
     return cals, arrays["times"], frames, _find_charges(frames, opts)
 
 
@@ -1208,15 +1208,18 @@ def _social(
     gaze: Mapping[str, tuple[FloatArray, FloatArray, FloatArray]],
     times: FloatArray,
     segments: Mapping[str, tuple[float, float]],
+    calibrations: Mapping[str, GazeCalibration],
     opts: RunOptions,
 ) -> dict[str, tuple[FloatArray, FloatArray, FloatArray]]:
-    """The gaze rays that take part in social charges: without each wearer's rays inside
-    its calibration segment (NaN there) unless ``charges_in_calibration``."""
+    """The gaze rays that take part in social charges: without the rays of each
+    calibrated wearer inside its calibration segment (NaN there) unless
+    ``charges_in_calibration``. A wearer whose segment failed (did not fixate, ...) keeps
+    them: it was doing something else then."""
     if opts.charges_in_calibration:
         return dict(gaze)
     out = {}
     for n, (p, v, h) in gaze.items():
-        if n in segments:
+        if n in segments and n in calibrations and calibrations[n].calibrated:
             t0, t1 = segments[n]
             inside = (times >= t0) & (times <= t1)
             p, v, h = p.copy(), v.copy(), h.copy()
