@@ -89,6 +89,13 @@ def test_joint_attention_is_found_where_wearers_look_together(results):
         assert ja["groups"] >= 20, (seed, ja)
         assert ja["found_fraction"] >= 0.88, (seed, ja)
         assert ja["error_median_m"] < 0.12, (seed, ja)
+        # false charges (no two members look at one thing): the wearers' rays inside their
+        # own calibration segments are left out of the charges (with them in, wearers
+        # calibrating side by side on nearby points make half of all charges), and so are
+        # rays 0.5 m or less from the charge (min_charge_depth). Measured on seeds 1-3:
+        # 0.58, 0.51, 0.48; with calibration rays: 0.79, 0.82, 0.77; without the depth
+        # gate 0.61, 0.59, 0.55.
+        assert ja["false_fraction"] < 0.7, (seed, ja)
 
 
 def test_run_poses_at_its_output_rate(tmp_path, monkeypatch):

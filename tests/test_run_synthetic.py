@@ -163,3 +163,23 @@ def test_calibration_round_trips_through_json():
         back = GazeCalibration.from_dict(json.loads(json.dumps(_jsonable(cal.to_dict()))))
         for k, v in cal.to_dict().items():
             np.testing.assert_array_equal(getattr(back, k), v)
+
+
+def test_charges_right_in_front_of_an_eye_are_left_out():
+    # min_charge_depth: two rays cross somewhere whatever their wearers look at, often right
+    # in front of one of them; a ray is no member of a charge nearer than 0.5 m to its eye
+    from socialcam.charges import GazeRays
+    from socialcam.pipeline import _find_charges
+
+    eyes = np.array([[0.0, 0.0, 1.6], [0.3, 2.2, 1.6], [2.0, 0.5, 1.6]])
+    ahead = np.array([-0.3, 0.0, 0.0])
+    x = eyes[2] + ahead  # 0.3 m in front of wearer 2, which looks through it
+    frame = GazeRays(eyes, np.array([x, x, x + ahead]) - eyes, 0.02, normalize=True)
+    (charges,) = _find_charges([frame], RunOptions())
+    assert [sorted(c.members.tolist()) for c in charges] == [[0, 1]]
+    (charges,) = _find_charges([frame], RunOptions(min_charge_depth=0))
+    assert [sorted(c.members.tolist()) for c in charges] == [[0, 1, 2]]
+    # a crossing of two rays 0.3 m in front of one of them: no charge left
+    near = GazeRays(eyes[1:], np.array([x, x + ahead]) - eyes[1:], 0.02, normalize=True)
+    assert _find_charges([near], RunOptions())[0] == []
+    assert len(_find_charges([near], RunOptions(min_charge_depth=0))[0]) == 1

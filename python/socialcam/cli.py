@@ -98,6 +98,11 @@ def main(argv: Sequence[str] | None = None) -> int:
         "--member-sigma", type=float, default=None, help="charge membership, bandwidths"
     )
     rn.add_argument("--min-members", type=int, default=None, help="fewest members of a charge")
+    rn.add_argument(
+        "--sparse-calibration",
+        action="store_true",
+        help="calibrate gaze from the --fps poses only, not every frame of the segments",
+    )
     rn.add_argument("--no-overlays", action="store_true", help="skip the overlay videos")
     rn.add_argument("--no-plots", action="store_true", help="skip PNG plots")
     rn.add_argument("--force", action="store_true", help="replace another run's results in --out")
@@ -346,6 +351,8 @@ def _run(parser: argparse.ArgumentParser, args: argparse.Namespace) -> int:
     )
     if args.no_overlays:
         options["overlays"] = False
+    if args.sparse_calibration:
+        options["dense_calibration"] = False
     if args.no_plots:
         options["plots"] = False
     intrinsics = None

@@ -1672,3 +1672,167 @@ def pose_errors(
     cosang = (np.einsum("nij,nij->n", Ra, np.concatenate(true_R)) - 1) / 2
     rot = np.arccos(np.clip(cosang, -1.0, 1.0))
     return PoseErrors(tuple(rec.names), np.concatenate(who), centre, rot, float(s))
+
+
+class _Window:
+    """Every frame of an opened video with local time in ``[start, end]``, as the stream
+    :func:`_pose_video` reads (it asks for frames at a rate; the window ignores it)."""
+
+    def __init__(self, vid: Any, start: float, end: float) -> None:
+        self.vid, self.start, self.end, self.info = vid, start, end, vid.info
+
+    def frames(self, fps: float | None = None, *, gray: bool = False) -> Iterator[Any]:
+        return iter(self.vid.frames(start=self.start, end=self.end, gray=gray))
+
+
+def pose_segment(
+    rec: VideoReconstruction,
+    video: str | os.PathLike[str],
+    t0: float,
+    t1: float,
+    *,
+    options: VideoSfmOptions | None = None,
+    **overrides: Any,
+) -> Cameras:
+    """Camera poses of EVERY frame of ``video`` (the video's own rate, not ``fps``) whose
+    time on the common clock lies in ``[t0, t1]``, in the world frame of ``rec`` (a saved
+    :func:`reconstruct_videos` result of the same videos).
+
+    The frames are registered against the existing map exactly as the output frames
+    between keyframes are: KLT tracks of the map points that the registered keyframes
+    around them observe, PnP, and the same checks (``min_inliers``, ``max_rms``, the
+    forward/backward ``max_split`` and the neighbour ``max_jump`` / ``max_turn``, in metres
+    when ``rec`` is metric, else relative to the map's depth). Nothing is mapped anew, so
+    the cost is that of tracking the segment's frames: meant for short segments that need
+    every frame, such as the gaze calibration of Eq 3.1, whose 3-12 Hz head jitter a
+    10 Hz sampling aliases.
+
+    Parameters
+    ----------
+    rec : the reconstruction (its ``out_dir`` must hold the ``model/`` it saved).
+    video : the video of one person of ``rec`` (its file stem names the person).
+    t0, t1 : the segment, seconds on the common clock, ``t0 < t1``.
+    options, **overrides : :class:`VideoSfmOptions` (those of ``rec``), field overrides.
+
+    Returns
+    -------
+    Cameras
+        The posed frames of the segment (unposed frames are left out), ``times`` on the
+        common clock; possibly empty.
+
+    Raises
+    ------
+    ValueError
+        A video of no person of ``rec``, a bad segment, a ``rec`` without its saved model.
+    """
+    from socialcam.video import open_video
+
+    opts = _options(options, overrides)
+    a = check_float(t0, "t0")
+    b = check_float(t1, "t1")
+    if not b > a:
+        raise ValueError(f"t1: must exceed t0 ({a}), got {b}")
+    name = Path(video).stem
+    if name not in rec.names:
+        raise ValueError(f"video: {name} is not one of the persons {list(rec.names)}")
+    model_dir = rec.out_dir / "model"
+    if not (model_dir / "images.bin").is_file() and not (model_dir / "images.txt").is_file():
+        raise ValueError(f"rec: {rec.out_dir} holds no saved model (model/)")
+    offset = float(rec.offsets[rec.names.index(name)])
+    vid = open_video(Path(video))
+    try:
+        return _pose_window(rec, vid, name, a - offset, b - offset, offset, opts, model_dir)
+    finally:
+        if hasattr(vid, "close"):
+            vid.close()
+
+
+def _pose_window(
+    rec: VideoReconstruction,
+    vid: Any,
+    name: str,
+    lo: float,
+    hi: float,
+    offset: float,
+    opts: VideoSfmOptions,
+    model_dir: Path,
+) -> Cameras:
+    """:func:`pose_segment` on the opened ``vid`` of ``name``, local times ``[lo, hi]``."""
+    import pycolmap
+
+    q = rec.quality[name]
+    model = pycolmap.Reconstruction(str(model_dir))
+    kf_time: dict[float, Any] = {}
+    lens = None
+    for img in model.images.values():
+        person, _, stem = img.name.partition("/")
+        if person != name or not img.has_pose or img.num_points3D < opts.min_inliers:
+            continue
+        k = int(Path(stem).stem)
+        if k < len(q.times):
+            kf_time[float(q.times[k]) - offset] = img
+            lens = model.cameras[img.camera_id]
+    times = vid.timestamps()
+    empty = Cameras(np.eye(3), np.zeros((0, 3, 3)), np.zeros((0, 3)), np.zeros(0))
+    if lens is None or len(times) == 0:
+        return empty
+    # from the last keyframe at or before the segment to the first at or after it
+    before = [t for t in kf_time if t <= lo]
+    after = [t for t in kf_time if t >= hi]
+    start = max(before) if before else lo
+    end = min(after) if after else hi
+    window = np.flatnonzero((times >= start - 1e-6) & (times <= end + 1e-6))
+    if len(window) == 0:
+        return empty
+    wt = times[window]
+    reg_w: dict[str, Any] = {}
+    half = 0.5 * float(np.median(np.diff(times))) if len(times) > 1 else 1.0
+    for t, img in kf_time.items():
+        j = int(np.argmin(np.abs(wt - t)))
+        if abs(wt[j] - t) <= half:
+            reg_w[f"{name}/{j:06d}.png"] = img
+    F = len(window)
+    Rs, ts = np.full((F, 3, 3), np.nan), np.full((F, 3), np.nan)
+    rms, n_inl = np.full(F, np.nan), np.zeros(F, np.int64)
+    is_kf, split = np.zeros(F, bool), np.full((F, 2), np.nan)
+    reasons: dict[int, str] = {}
+
+    class _NoBar:
+        def update(self, n: int) -> None:
+            return None
+
+    src = _Window(vid, float(wt[0]) - 1e-6, float(wt[-1]) + 1e-6)
+    _pose_video(
+        src, name, F, model, reg_w, lens, opts, _NoBar(), Rs, ts, rms, n_inl, is_kf, reasons, split
+    )
+    posed = np.isfinite(Rs[:, 0, 0])
+    C = -np.einsum("fji,fj->fi", np.nan_to_num(Rs), np.nan_to_num(ts))
+    if np.isfinite(rec.scale):
+        jump = opts.max_jump
+    else:  # the map's unit: 0.2 of the median keyframe-to-point depth, as reconstruct_videos
+        depth = [
+            np.median(
+                np.linalg.norm(
+                    _keyframe_observations(model, im)[1] - im.projection_center(), axis=1
+                )
+            )
+            for im in reg_w.values()
+        ] or [1.0]
+        jump = 0.2 * float(np.median(depth))
+    with np.errstate(invalid="ignore"):
+        posed &= ~(
+            (split[:, 0] > jump * opts.max_split / opts.max_jump)
+            | (split[:, 1] > opts.max_split_turn)
+        )
+    idx = np.flatnonzero(posed)
+    bad = _neighbour_outliers(idx, C[idx], Rs[idx], jump, opts.max_turn) & ~is_kf[idx]
+    posed[idx[bad]] = False
+    keep = posed & (wt >= lo - 1e-6) & (wt <= hi + 1e-6)
+    if not keep.any():
+        return empty
+    K = np.asarray(lens.calibration_matrix(), dtype=np.float64).copy()
+    K[0, 2] += COLMAP_TO_OPENCV_PIXEL
+    K[1, 2] += COLMAP_TO_OPENCV_PIXEL
+    cams = Cameras(K, Rs[keep], C[keep], wt[keep] + offset)
+    cams._colmap = [lens] * int(keep.sum())
+    return cams
