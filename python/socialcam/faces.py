@@ -8,8 +8,10 @@ person, 3D faces and their primary gaze rays (thesis Sec 3.2.2, Eq 3.2–3.4).
 - :func:`reconstruct_faces` turns the detections of several calibrated cameras into 3D
   faces: wearers' faces are anchored to the projection of their own head camera, everyone
   else is grouped by the sequential RANSAC of Eq 3.2 (Rust core), landmarks are
-  triangulated (Eq 3.3) and refined over whole tracks (Eq 3.4), and each face gives a
-  primary gaze ray (:class:`socialcam.GazeRays`).
+  triangulated (Eq 3.3) and refined over whole tracks (Eq 3.4); each track then becomes one
+  rigid face (its shape shared by the track, a pose per instant fitted to the detections,
+  rotations tied over time), and each face gives a primary gaze ray
+  (:class:`socialcam.GazeRays`).
 
 Landmark order everywhere: ``LANDMARKS`` = left eye, right eye, nose, left mouth corner,
 right mouth corner, where "left" is the IMAGE left of a face seen from the front (the
