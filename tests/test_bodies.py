@@ -40,9 +40,9 @@ def _visible_pairs(pc):
 def test_skeleton_from_photos_meets_the_target(clips):
     """60 photos by 6 photographers 3.5–6 m away, 3 px noise, 5 % joints missed, 7.8 % of
     the pairs inverted, a second person in 30 % of the photos. Measured median joint error
-    over seeds 0–9: 131_01 walk 19.6–26.2 mm, 131_02 walk 18.4–24.8 mm, 131_01 start
-    17.3–26.3 mm, 131_02 stop 16.7–21.7 mm (target ≤ 30 mm); without swap repair 21.5–72 mm;
-    the right detection chosen in every photo."""
+    over seeds 0–9 (benches/bodies_accuracy.py): 131_01 walk 19.6–26.2 mm, 131_02 walk
+    18.4–24.5 mm, 131_01 start 18.2–26.3 mm, 131_02 stop 17.3–24.9 mm (target ≤ 30 mm);
+    without swap repair 21.5–72 mm; the right detection chosen in every photo."""
     for subject, other, seed in (
         ("131_01_walk", "131_02_walk", 0),
         ("131_02_walk", "131_01_walk", 1),

@@ -289,7 +289,7 @@ def reconstruct_body(
         both = np.isfinite(keep) & np.isfinite(cross)
         keep, cross = np.where(both, keep, 0.0), np.where(both, cross, 0.0)
         # a pair is exchanged when it reprojects clearly closer swapped (a vote of all pairs
-        # of a photo for whole-body swaps changed nothing measurable: 16.7-26.3 mm either way)
+        # of a photo for whole-body swaps changed nothing measurable: 17-26 mm either way)
         change = both & (cross < o.pair_ratio * keep)
         if not change.any():
             break
