@@ -341,8 +341,9 @@ class FaceOptions:
         mean of the track's landmarks, refined) moved per instant by the rotation and
         position that best reproject onto the detections; the gaze is the rotated normal
         of that shape and ``h`` comes from the rotation's covariance. Measured with 3 %
-        landmark noise on rendered circles and loops (7 scenes): gaze 4.8–6.9° → 2.8–4.4°
-        median, landmarks 5.3–7.4 → 2.9–4.4 mm
+        landmark noise on rendered circles and loops (10 scenes): gaze 4.8–6.9° → 2.8–4.4°
+        median, landmarks 5.3–7.4 → 2.9–4.4 mm; with MTCNN (1280×960) better on 3 of 5
+        scenes but worse on one circle (4.7 → 8.1 mm, 3.9 → 4.9°)
     rigid_turn_rate : with ``rigid``, the rotations of consecutive instants are tied by
         ``1 / (rigid_turn_rate · Δt)²`` (rad/s; a head holding a gaze), with robust
         (Cauchy) weights that let real turns through; ``None`` = each instant alone
