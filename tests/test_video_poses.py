@@ -153,6 +153,98 @@ def test_poses_are_gravity_aligned_and_pinhole(scene, posed):
         assert np.abs(K[:2, 2] - Kt[:2, 2]).max() < 0.05
 
 
+def _virtual_faces(truth, rng, n: int = 6, max_dist: float = 2.5):
+    """Landmarks ``(n, 5, 3)`` of still faces at head height that at least two wearers see
+    (in the image, turned to the camera by less than 70°, within ``max_dist`` metres: a
+    conversation) in the most frames."""
+    from socialcam.faces import LANDMARKS
+
+    assert len(LANDMARKS) == 5
+    cams = [truth.cameras(v) for v in range(len(truth.names))]
+    W, H = truth.size
+    cand, score = [], []
+    for _ in range(300):
+        c = np.r_[rng.uniform(-3, 3, 2), rng.uniform(1.5, 1.8)]
+        yaw = rng.uniform(0, 2 * np.pi)
+        f = np.array([np.cos(yaw), np.sin(yaw), 0.0])
+        left = np.cross([0.0, 0.0, 1.0], f)
+        up = np.array([0.0, 0.0, 0.03])
+        X = np.array([c - 0.032 * left + up, c + 0.032 * left + up, c + 0.02 * f,
+                      c - 0.025 * left - up, c + 0.025 * left - up])  # fmt: skip
+        seen = 0
+        for cam in cams:
+            Xc = np.einsum("fij,fpj->fpi", cam.R, X[None] - cam.C[:, None])
+            uv = Xc[..., :2] / Xc[..., 2:] * cam.K[:, None, [0, 1], [0, 1]] + cam.K[:, None, :2, 2]
+            to_cam = cam.C - c
+            ok = (Xc[..., 2] > 0.3).all(1) & (uv[..., 0] > 0).all(1) & (uv[..., 0] < W - 1).all(1)
+            ok &= (uv[..., 1] > 0).all(1) & (uv[..., 1] < H - 1).all(1)
+            dist = np.linalg.norm(to_cam, axis=1)
+            ok &= (to_cam @ f > np.cos(np.radians(70)) * dist) & (dist < max_dist)
+            seen += ok
+        cand.append(X)
+        score.append(int((seen >= 2).sum()) if isinstance(seen, np.ndarray) else 0)
+    best = np.argsort(score)[::-1][:n]
+    return np.array([cand[i] for i in best])
+
+
+def test_faces_on_sfm_poses(scene, posed):
+    """Issue 11 on these poses: still faces placed where two wearers' views overlap, seen
+    through the true cameras (detector-like landmarks: projection + 3 % of the face size
+    noise, at 1280×960 scale), reconstructed (Eq 3.2–3.4, ``reconstruct_faces``) with the
+    SfM cameras and mapped onto the truth by the similarity of the camera centres. Measured
+    on this scene 26 mm median landmark error over 160 face-instants (target ≤ 3 cm; the
+    same detections with the true cameras: 3.6 mm; faces up to 4 m away instead of 2.5 m:
+    43 mm, the depth error growing with distance over a short baseline)."""
+    from socialcam.faces import FaceDetections, reconstruct_faces
+    from socialcam.geometry import align_similarity
+
+    _, rec, _ = posed
+    truth = scene.truth
+    rng = np.random.default_rng(0)
+    faces = _virtual_faces(truth, rng)
+    scale = 3.2
+    S = np.diag([scale, scale, 1.0])
+
+    def scaled(K):
+        Ks = S @ K
+        Ks[..., :2, 2] = (K[..., :2, 2] + 0.5) * scale - 0.5
+        return Ks
+
+    dets, cams, E, T = [], [], [], []
+    for v, name in enumerate(truth.names):
+        tc, sc_ = truth.cameras(v), rec.cameras[name]
+        k = np.abs(tc.times[None] - sc_.times[:, None]).argmin(axis=1)
+        Kt = scaled(tc.K[0])
+        fr, lm = [], []
+        for i, kk in enumerate(k):
+            Xc = np.einsum("ij,fpj->fpi", tc.R[kk], faces - tc.C[kk])
+            uv = Xc[..., :2] / Xc[..., 2:] * np.diag(Kt)[:2] + Kt[:2, 2]
+            inside = (uv >= 0).all((1, 2)) & (uv[..., 0] < 1279).all(1) & (uv[..., 1] < 959).all(1)
+            for p in np.nonzero(inside & (Xc[..., 2] > 0.3).all(1))[0]:
+                size = Kt[0, 0] * 0.13 / Xc[p, :, 2].mean()
+                fr.append(i)
+                lm.append(uv[p] + 0.03 * size * rng.normal(size=(5, 2)))
+        lm_ = np.array(lm).reshape(-1, 5, 2)
+        c = lm_.mean(axis=1)
+        sz = Kt[0, 0] * 0.13 / 2.0
+        box = np.c_[c - sz / 2, np.full((len(c), 2), sz)]
+        dets.append(FaceDetections(np.array(fr, np.int64), box, np.ones(len(fr)), lm_,
+                                   len(sc_), (1280, 960)))  # fmt: skip
+        cams.append(sc.Cameras(scaled(sc_.K), sc_.R, sc_.C, sc_.times))
+        E.append(sc_.C)
+        T.append(tc.C[k])
+    s, Rs, t = align_similarity(np.concatenate(E), np.concatenate(T))
+    f3 = reconstruct_faces(dets, cams, anchors=False)
+    err = []
+    for j in range(len(f3.person)):
+        for ti in np.nonzero(np.isfinite(f3.landmarks[:, j, 0, 0]))[0]:
+            X = s * f3.landmarks[ti, j] @ Rs.T + t
+            d = np.linalg.norm(X[None] - faces, axis=-1).mean(-1)
+            err.append(d.min())
+    assert len(err) >= 60, len(err)
+    assert np.median(err) <= 0.03, np.median(err)
+
+
 @pytest.mark.filterwarnings("ignore::socialcam.sfm.VideoPosesWarning")
 def test_global_mapping(scene, tmp_path, no_vocab_tree):
     """COLMAP's global mapper instead of the incremental one, behind the same outlier check

@@ -8,8 +8,10 @@ person, 3D faces and their primary gaze rays (thesis Sec 3.2.2, Eq 3.2–3.4).
 - :func:`reconstruct_faces` turns the detections of several calibrated cameras into 3D
   faces: wearers' faces are anchored to the projection of their own head camera, everyone
   else is grouped by the sequential RANSAC of Eq 3.2 (Rust core), landmarks are
-  triangulated (Eq 3.3) and refined over whole tracks (Eq 3.4), and each face gives a
-  primary gaze ray (:class:`socialcam.GazeRays`).
+  triangulated (Eq 3.3) and refined over whole tracks (Eq 3.4); each track then becomes one
+  rigid face (its shape shared by the track, a pose per instant fitted to the detections,
+  rotations tied over time), and each face gives a primary gaze ray
+  (:class:`socialcam.GazeRays`).
 
 Landmark order everywhere: ``LANDMARKS`` = left eye, right eye, nose, left mouth corner,
 right mouth corner, where "left" is the IMAGE left of a face seen from the front (the
@@ -335,6 +337,18 @@ class FaceOptions:
     eye_in_head : eye-in-head bandwidth added to the landmark uncertainty in ``h``
     sync_tolerance : frames of different cameras closer than this (s) are one instant
         (default: half a frame of the fastest camera)
+    rigid : after Eq 3.4, every track becomes one rigid face: its shape (the Procrustes
+        mean of the track's landmarks, refined) moved per instant by the rotation and
+        position that best reproject onto the detections; the gaze is the rotated normal
+        of that shape and ``h`` comes from the rotation's covariance. Measured with 3 %
+        landmark noise on rendered circles and loops (10 scenes): gaze 4.8–6.9° → 2.8–4.4°
+        median, landmarks 5.3–7.4 → 2.9–4.4 mm; with MTCNN (1280×960) better on 3 of 5
+        scenes but worse on one circle (4.7 → 8.1 mm, 3.9 → 4.9°)
+    rigid_turn_rate : with ``rigid``, the rotations of consecutive instants are tied by
+        ``1 / (rigid_turn_rate · Δt)²`` (rad/s; a head holding a gaze), with robust
+        (Cauchy) weights that let real turns through; ``None`` = each instant alone
+        (measured: 4.3–5.8° median gaze instead of 2.8–4.4°; 0.125 rad/s gives the same
+        as 0.25 within 0.2°)
     """
 
     rel_threshold: float = 0.1
@@ -351,6 +365,8 @@ class FaceOptions:
     refine_iterations: int = 5
     eye_in_head: float = 0.05
     sync_tolerance: float | None = None
+    rigid: bool = True
+    rigid_turn_rate: float | None = 0.25
 
     def __post_init__(self) -> None:
         for name in (
@@ -367,6 +383,8 @@ class FaceOptions:
             check_float(getattr(self, name), name, min=0.0)
         if self.turn_rate is not None:
             check_float(self.turn_rate, "turn_rate", min=0.0, min_exclusive=True)
+        if self.rigid_turn_rate is not None:
+            check_float(self.rigid_turn_rate, "rigid_turn_rate", min=0.0, min_exclusive=True)
         if self.sync_tolerance is not None:
             check_float(self.sync_tolerance, "sync_tolerance", min=0.0, min_exclusive=True)
         check_int(self.max_gap, "max_gap", min=0)
@@ -389,7 +407,8 @@ class Faces3D:
     landmarks : (T, J, 5, 3) metres (``LANDMARKS`` order), NaN = not reconstructed then
     landmark_std : (T, J, 5) metres
     p, v : (T, J, 3) primary gaze rays: origin between the eyes, unit direction
-    h : (T, J) bandwidth: ``√(eye_in_head² + σ²)`` with σ the direction's std (radians)
+    h : (T, J) bandwidth: ``√(eye_in_head² + σ²)`` with σ the direction's std (radians:
+        from the rigid face's rotation covariance, or from the landmark std)
     views : (T, J) cameras that saw each face
     detection_person : per camera (N_v,) index into ``person`` of each detection, −1 when
         it joined no face (seen once, or failing every test)
@@ -417,6 +436,121 @@ class Faces3D:
         return GazeRays(
             self.p[t, ok], self.v[t, ok], self.h[t, ok], self.person[ok], normalize=True
         )
+
+
+# ----------------------------------------------------------------------------- rigid faces
+def _rotvec(w: FloatArray) -> FloatArray:
+    """Rotation matrices ``(N, 3, 3)`` of rotation vectors ``(N, 3)``."""
+    from scipy.spatial.transform import Rotation  # type: ignore[import-untyped,unused-ignore]
+
+    return np.asarray(Rotation.from_rotvec(w).as_matrix()).reshape(-1, 3, 3)
+
+
+def _kabsch(A: FloatArray, B: FloatArray) -> tuple[FloatArray, FloatArray]:
+    """Rotations ``(N, 3, 3)`` and translations ``(N, 3)`` with ``B ≈ R A + c`` for point
+    sets ``A (5, 3)`` (centred) and ``B (N, 5, 3)``."""
+    cb = B.mean(axis=1)
+    H = np.einsum("pi,npj->nij", A, B - cb[:, None])
+    U, _s, Vt = np.linalg.svd(H)
+    d = np.sign(np.linalg.det(np.transpose(Vt, (0, 2, 1)) @ np.transpose(U, (0, 2, 1))))
+    D = np.zeros((len(B), 3, 3))
+    D[:, 0, 0] = D[:, 1, 1] = 1.0
+    D[:, 2, 2] = d
+    R = np.transpose(Vt, (0, 2, 1)) @ D @ np.transpose(U, (0, 2, 1))
+    return R, cb
+
+
+def _rigid_track(
+    K: FloatArray,
+    R: FloatArray,
+    C: FloatArray,
+    step: IntArray,
+    slot: IntArray,
+    uv: FloatArray,
+    sigma: FloatArray,
+    X: FloatArray,
+    weight: FloatArray,
+    times: FloatArray | None = None,
+    turn_rate: float | None = None,
+    iterations: int = 5,
+    shape: bool = True,
+) -> tuple[FloatArray, FloatArray]:
+    """One rigid face per track: the shape is the weighted Procrustes mean of the track's
+    landmarks ``X (n, 5, 3)`` (the observed instants ``0..n-1``), and every instant gets the
+    rotation and position of that shape that best reprojects onto its detections (Gauss–
+    Newton on the reprojection error in units of ``sigma``). Returns the landmarks
+    ``(n, 5, 3)`` and, per instant, the covariance ``(n, 3, 3)`` of the rotation (radians²,
+    world axes)."""
+    n = len(X)
+    # generalised Procrustes: align every instant to the mean shape, average, repeat
+    S = X[int(np.argmax(weight))] - X[int(np.argmax(weight))].mean(0)
+    for _ in range(3):
+        Rt, c = _kabsch(S, X)
+        local = np.einsum("nji,npj->npi", Rt, X - c[:, None])
+        S = np.einsum("n,npi->pi", weight, local) / weight.sum()
+        S -= S.mean(0)
+    Rt, c = _kabsch(S, X)
+
+    def residual(Rt_: FloatArray, c_: FloatArray, S: FloatArray = S) -> FloatArray:
+        Xw = np.einsum("nij,pj->npi", Rt_, S) + c_[:, None]  # (n, 5, 3)
+        Xc = np.einsum("rij,rpj->rpi", R[slot], Xw[step] - C[slot][:, None])
+        f = np.stack([K[slot, 0, 0], K[slot, 1, 1]], -1)[:, None]
+        p = Xc[..., :2] / Xc[..., 2:] * f + K[slot, None, :2, 2]
+        return ((p - uv) / sigma[:, None, None]).reshape(len(slot), -1)  # (rows, 10)
+
+    eps = 1e-6
+    cov = np.full((n, 3, 3), np.nan)
+    for _ in range(iterations):
+        r0 = residual(Rt, c)
+        J = np.empty((len(slot), 10, 6))
+        for a in range(6):
+            d = np.zeros((n, 6))
+            d[:, a] = eps
+            Ra = _rotvec(d[:, :3]) @ Rt
+            J[:, :, a] = (residual(Ra, c + d[:, 3:]) - r0) / eps
+        H = np.zeros((n, 6, 6))
+        g = np.zeros((n, 6))
+        np.add.at(H, step, np.einsum("rka,rkb->rab", J, J))
+        np.add.at(g, step, np.einsum("rka,rk->ra", J, r0))
+        H += 1e-9 * np.eye(6)
+        if turn_rate is None or times is None or n < 2:
+            dx = -np.linalg.solve(H, g[..., None])[..., 0]
+        else:  # rotations of consecutive instants tied together (robust, Cauchy)
+            from scipy.linalg import solveh_banded  # type: ignore[import-untyped,unused-ignore]
+            from scipy.spatial.transform import (  # type: ignore[import-untyped,unused-ignore]
+                Rotation,
+            )
+
+            e = Rotation.from_matrix(Rt[1:] @ np.transpose(Rt[:-1], (0, 2, 1))).as_rotvec()
+            lam = 1.0 / (turn_rate * np.maximum(np.diff(times), 1e-6)) ** 2
+            w = lam / (1.0 + lam * np.einsum("ni,ni->n", e, e))  # Cauchy: scale 1 σ
+            # block-tridiagonal normal matrix in the upper banded form of solveh_banded
+            ab = np.zeros((12, 6 * n))
+            gd = g.copy()
+            Hb = H.copy()
+            Hb[:-1, :3, :3] += w[:, None, None] * np.eye(3)
+            Hb[1:, :3, :3] += w[:, None, None] * np.eye(3)
+            gd[1:, :3] += w[:, None] * e
+            gd[:-1, :3] -= w[:, None] * e
+            for i in range(6):
+                for j in range(i, 6):
+                    ab[11 + i - j, j::6] = Hb[:, i, j]
+            for i in range(3):
+                ab[11 - 6, 6 + i :: 6][: n - 1] = -w
+            dx = -solveh_banded(ab, gd.reshape(-1)).reshape(n, 6)
+        Rt = _rotvec(np.asarray(dx[:, :3], np.float64)) @ Rt
+        c = c + dx[:, 3:]
+        cov = np.linalg.inv(H)[:, :3, :3]
+        if shape:  # one Gauss–Newton step on the shape shared by all instants
+            rs = residual(Rt, c, S).reshape(-1)
+            Js = np.empty((len(rs), 15))
+            for a in range(15):
+                ds = np.zeros(15)
+                ds[a] = eps
+                Js[:, a] = (residual(Rt, c, S + ds.reshape(5, 3)).reshape(-1) - rs) / eps
+            step_s = np.linalg.solve(Js.T @ Js + 1e-6 * np.eye(15), Js.T @ rs)
+            S = S - step_s.reshape(5, 3)
+    return np.einsum("nij,pj->npi", Rt, S) + c[:, None], cov
 
 
 def _instants(cams: Sequence[Any], tol: float | None) -> tuple[FloatArray, list[IntArray]]:
@@ -635,6 +769,7 @@ def reconstruct_faces(
     L = np.full((T, J, 5, 3), np.nan)
     Ls = np.full((T, J, 5), np.nan)
     nv = np.zeros((T, J), np.int64)
+    rig_sig = np.full((T, J), np.nan)
     dt = float(np.median(np.diff(times))) if T > 1 else 1.0
     lam = 0.0 if o.smoothness <= 0 else 1.0 / (o.smoothness * dt) ** 2
     lam_s = (
@@ -664,6 +799,18 @@ def reconstruct_faces(
             sr[ts - t0] = S[gs]
         L[ts, j] = xr[ts - t0]
         Ls[ts, j] = sr[ts - t0]
+        if o.rigid:
+            at = np.searchsorted(ts - t0, step)
+            L[ts, j], cov = _rigid_track(
+                K_, R_, C_, at, slot_[rows], lm_[rows], sigma[rows], xr[ts - t0],
+                nviews[gs].astype(np.float64), times[ts], o.rigid_turn_rate,
+            )  # fmt: skip
+            n0 = np.cross(
+                L[ts, j, 1] - L[ts, j, 0], L[ts, j, 3] + L[ts, j, 4] - L[ts, j, 0] - L[ts, j, 1]
+            )
+            n0 /= np.linalg.norm(n0, axis=-1, keepdims=True)
+            tr = np.trace(cov, axis1=1, axis2=2) - np.einsum("ni,nij,nj->n", n0, cov, n0)
+            rig_sig[ts, j] = np.sqrt(np.maximum(tr, 0.0) / 2)
         nv[ts, j] = nviews[gs]
     # detections → person column
     for r in range(len(group)):
@@ -674,6 +821,8 @@ def reconstruct_faces(
     p, vv, sg = _core.face_gaze(
         np.ascontiguousarray(flatL), np.ascontiguousarray(np.nan_to_num(Ls, nan=1.0).reshape(-1, 5))
     )
+    if o.rigid:
+        sg = rig_sig.reshape(-1)
     h = np.sqrt(o.eye_in_head**2 + sg**2)
     return Faces3D(
         times=readonly(times),

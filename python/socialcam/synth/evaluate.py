@@ -363,7 +363,9 @@ def face_joint_attention(
     members among them; ``ego``: charges of the wearers' true primary gaze rays (truth
     camera poses and calibration, ``h`` the true eye-in-head spread), over the groups of
     ≥ 2 wearers. A group is found when a charge holding ≥ 2 of its members lies within
-    ``radius`` of the looked-at eye centre; its error is that distance."""
+    ``radius`` of the looked-at eye centre; its error is that distance. ``ego_same_groups``:
+    the ego rays scored on the groups the exo rays were scored on (same instants and
+    looked-at heads; a group of people without a camera has no ego rays and is left out)."""
     from socialcam.charges import GazeRays, find_charges
 
     V = len(truth.names)
@@ -376,7 +378,7 @@ def face_joint_attention(
         same = codes[k] == codes[k - 1]
         since[k] = np.where(same, since[k - 1] + ft[k] - ft[k - 1], 0.0)
 
-    def score(rays: Any, members_ok: Any, k: int, out: dict[str, list[float]]) -> None:
+    def score(rays: Any, members_ok: Any, k: int, out: dict[str, list[Any]]) -> None:
         groups: dict[int, list[int]] = {}
         for p in members_ok:
             if since[k, p] >= settle and codes[k, p] <= HEAD:
@@ -395,11 +397,13 @@ def face_joint_attention(
                 default=np.inf,
             )
             out["groups"].append(code)
+            out["keys"].append((k, code))
+            out["all"].append(best)
             if best <= radius:
                 out["errors"].append(best)
 
-    exo: dict[str, list[float]] = {"groups": [], "errors": []}
-    ego: dict[str, list[float]] = {"groups": [], "errors": []}
+    exo: dict[str, list[Any]] = {"groups": [], "errors": [], "keys": [], "all": []}
+    ego: dict[str, list[Any]] = {"groups": [], "errors": [], "keys": [], "all": []}
     for t in range(len(faces.times)):
         k = int(np.argmin(np.abs(ft - faces.times[t])))
         cols = [int(j) for j in np.nonzero(np.isfinite(faces.v[t, :, 0]))[0] if int(j) in owner]
@@ -413,7 +417,7 @@ def face_joint_attention(
         g = np.array([truth.gaze[v][k] for v in range(V)])
         score(GazeRays(p, g, truth.h), range(V), k, ego)
 
-    def summary(d: dict[str, list[float]]) -> dict[str, float]:
+    def summary(d: dict[str, list[Any]]) -> dict[str, float]:
         e = np.array(d["errors"])
         return {
             "groups": len(d["groups"]),
@@ -422,7 +426,21 @@ def face_joint_attention(
         }
 
     ex, eg = summary(exo), summary(ego)
-    return {"exo": ex, "ego": eg, "ratio": ex["error_median_m"] / eg["error_median_m"]}
+    # the ego rays on the same (instant, looked-at head) groups as the exo ones
+    at = {key: e for key, e in zip(ego["keys"], ego["all"], strict=True)}
+    same = [at[key] for key in exo["keys"] if key in at]
+    ok = [e for e in same if e <= radius]
+    eg_same = {
+        "groups": len(same),
+        "found_fraction": len(ok) / len(same) if same else float("nan"),
+        "error_median_m": float(np.median(ok)) if ok else float("nan"),
+    }
+    return {
+        "exo": ex,
+        "ego": eg,
+        "ego_same_groups": eg_same,
+        "ratio": ex["error_median_m"] / eg["error_median_m"],
+    }
 
 
 def truth_detections(

@@ -127,8 +127,8 @@ class SceneTruth:
         the five face landmarks (``socialcam.faces.LANDMARKS`` order) of every person
         ``P = V + n_people`` at that wearer's frame times (the viewer's own face too,
         though it is not drawn); empty otherwise
-    face_normal : per wearer ``(F_v, P, 3)`` unit normal of each face (the horizontal
-        head direction the head is drawn with)
+    face_normal : per wearer ``(F_v, P, 3)`` unit normal of each face (the head direction
+        the head is drawn with: turned and pitched)
     face_visible : per wearer ``(F_v, P)`` the face is drawn in that frame: all five
         landmarks inside the image, turned towards the camera by less than 75°, the ray
         to the face unobstructed, not the viewer's own face
@@ -914,17 +914,32 @@ def _codes_of_all(motion: _Motion, times: FloatArray) -> IntArray:
     return code
 
 
-def _head_centre(eye: FloatArray, head_dir: FloatArray) -> tuple[FloatArray, float]:
-    """Centre of the head box and its yaw for a person with eye centre ``eye``."""
+def _head_centre(
+    eye: FloatArray, head_dir: FloatArray, pitch: bool = True, up: float = 0.04
+) -> tuple[FloatArray, float, float]:
+    """Centre of the head box, its yaw and its pitch (0 unless ``pitch``: the head box
+    turns up and down with ``head_dir``) for a person with eye centre ``eye``; the box
+    centre is ``up`` metres above the eye along the head's up axis."""
     hyaw = float(np.arctan2(head_dir[1], head_dir[0]))
-    fwd = np.array([np.cos(hyaw), np.sin(hyaw), 0.0])
-    return eye - 0.05 * fwd + np.array([0, 0, 0.04]), hyaw
+    hpitch = float(np.arctan2(head_dir[2], np.hypot(head_dir[0], head_dir[1]))) if pitch else 0.0
+    fwd, _side, up_axis = _box_axes(hyaw, hpitch)
+    return eye - 0.05 * fwd + up * up_axis, hyaw, hpitch
 
 
-def _face_plane(eye: FloatArray, head_dir: FloatArray) -> Plane:
-    """The front of a head box (where the face photograph is drawn)."""
-    hc, hyaw = _head_centre(eye, head_dir)
-    return _box_faces("head", hc, HEAD_HALF, hyaw, [0] * 5)[0]
+def _eye_level(face_lm: Sequence[FloatArray], tex_shape: tuple[int, int]) -> FloatArray:
+    """Per person, the ``up`` of :func:`_head_centre` that puts the eyes of the face
+    photograph (texel landmarks ``face_lm[p] (5, 2)`` of a ``tex_shape`` image drawn over
+    the front of the head box) at the height of the eye centre."""
+    hz = HEAD_HALF[2]
+    rows = np.array([0.5 * (lm[0, 1] + lm[1, 1]) for lm in face_lm])
+    return (rows + 0.5) / tex_shape[0] * 2 * hz - hz
+
+
+def _face_plane(eye: FloatArray, head_dir: FloatArray, up: float = 0.04) -> Plane:
+    """The front of a head box (where the face photograph is drawn), pitched with the
+    head."""
+    hc, hyaw, hpitch = _head_centre(eye, head_dir, up=up)
+    return _box_faces("head", hc, HEAD_HALF, hyaw, [0] * 5, hpitch)[0]
 
 
 def _face_truth(
@@ -936,13 +951,14 @@ def _face_truth(
     """World landmarks ``(F, P, 5, 3)`` and face normals ``(F, P, 3)`` at ``times``;
     ``face_lm[p]`` are person ``p``'s landmarks in texel coordinates ``(5, 2)``."""
     th, tw = tex_shape
+    level = _eye_level(face_lm, tex_shape)
     out: list[FloatArray] = []
     normals: list[FloatArray] = []
     for t in times:
         eyes, head = _persons(motion, float(t))
         lms, ns = [], []
         for p in range(len(eyes)):
-            pl = _face_plane(eyes[p], head[p])
+            pl = _face_plane(eyes[p], head[p], float(level[p]))
             xy = face_lm[p]
             lms.append(
                 pl.point((xy[:, 0] + 0.5) * pl.size[0] / tw, (xy[:, 1] + 0.5) * pl.size[1] / th)
@@ -1046,32 +1062,33 @@ def _person_faces(P: int) -> tuple[list[U8Image], list[FloatArray]]:
 
 
 # ----------------------------------------------------------------------------- bodies
+def _box_axes(yaw: float, pitch: float) -> tuple[FloatArray, FloatArray, FloatArray]:
+    """Forward, left and up axes of a box turned by ``yaw`` about z, then ``pitch`` up."""
+    cp, sp = np.cos(pitch), np.sin(pitch)
+    fx = np.array([np.cos(yaw) * cp, np.sin(yaw) * cp, sp])
+    fy = np.array([-np.sin(yaw), np.cos(yaw), 0.0])
+    return fx, fy, np.cross(fx, fy)
+
+
 def _box_faces(
     name: str,
     centre: FloatArray,
     half: tuple[float, float, float],
     yaw: float,
     textures: Sequence[int],
+    pitch: float = 0.0,
 ) -> list[Plane]:
-    """Five faces (front, back, left, right, top) of a box turned by ``yaw`` about z;
-    ``textures`` gives one texture per face in that order (front = +x of the box)."""
-    fx = np.array([np.cos(yaw), np.sin(yaw), 0.0])
-    fy = np.array([-np.sin(yaw), np.cos(yaw), 0.0])
+    """Five faces (front, back, left, right, top) of a box turned by ``yaw`` about z and
+    tilted up by ``pitch``; ``textures`` gives one texture per face in that order (front =
+    +x of the box)."""
+    fx, fy, fz = _box_axes(yaw, pitch)
     hx, hy, hz = half
     return [
         face(f"{name}.front", centre + hx * fx, fx, 2 * hy, 2 * hz, textures[0]),
         face(f"{name}.back", centre - hx * fx, -fx, 2 * hy, 2 * hz, textures[1]),
-        face(f"{name}.left", centre + hy * fy, fy, 2 * hx, 2 * hz, textures[2]),
-        face(f"{name}.right", centre - hy * fy, -fy, 2 * hx, 2 * hz, textures[3]),
-        face(
-            f"{name}.top",
-            centre + np.array([0, 0, hz]),
-            np.array([0, 0, 1.0]),
-            2 * hx,
-            2 * hy,
-            textures[4],
-            right=fy,
-        ),
+        face(f"{name}.left", centre + hy * fy, fy, 2 * hx, 2 * hz, textures[2], right=-fx),
+        face(f"{name}.right", centre - hy * fy, -fy, 2 * hx, 2 * hz, textures[3], right=fx),
+        face(f"{name}.top", centre + hz * fz, fz, 2 * hx, 2 * hy, textures[4], right=fy),
     ]
 
 
@@ -1083,7 +1100,11 @@ def _dynamic_planes(
     head_tex: Sequence[Sequence[int]],
     target_tex: Sequence[Sequence[int]],
     bodies: bool,
+    head_up: FloatArray | None = None,
 ) -> list[Plane]:
+    """The moving planes at ``t`` seen by ``viewer``; ``head_up`` (per person, the ``up``
+    of :func:`_head_centre`) draws the heads pitched with the head direction and at that
+    height (faces scenes), ``None`` upright and 4 cm above the eyes."""
     out: list[Plane] = []
     eyes, head = _persons(motion, t)
     V = motion.eyes.shape[1]
@@ -1092,8 +1113,12 @@ def _dynamic_planes(
         for w in range(eyes.shape[0]):
             if w == viewer:
                 continue
-            hc, hyaw = _head_centre(eyes[w], head[w])
-            out += _box_faces(f"head{w}", hc, HEAD_HALF, hyaw, head_tex[w])
+            hc, hyaw, hpitch = (
+                _head_centre(eyes[w], head[w], False)
+                if head_up is None
+                else _head_centre(eyes[w], head[w], True, float(head_up[w]))
+            )
+            out += _box_faces(f"head{w}", hc, HEAD_HALF, hyaw, head_tex[w], hpitch)
             bc = np.array([eyes[w, 0], eyes[w, 1], 0.5 * (eyes[w, 2] - 0.22)])
             byaw = float(yaw[w]) if w < V else hyaw
             out += _box_faces(
@@ -1502,12 +1527,14 @@ def render_scene(
         head_tex.append([len(tex) - 1] * 5)
     face_lm: list[FloatArray] = []
     face_shape = (0, 0)
+    head_up: FloatArray | None = None
     if faces:
         face_imgs, face_lm = _person_faces(V + Q)
         face_shape = face_imgs[0].shape[:2]
         for p_, img_ in enumerate(face_imgs):
             tex.append(img_)
             head_tex[p_] = [len(tex) - 1, *head_tex[p_][1:]]
+        head_up = _eye_level(face_lm, face_shape)
     # clocks, claps and audio
     frame_times = [start[v] + np.arange(F) / fps_ for v in range(V)]
     lo, hi = float(start.max()), float(start.min() + F / fps_)
@@ -1591,7 +1618,14 @@ def render_scene(
                 K_v = lenses[v][0]
                 for k in range(F):
                     dyn = _dynamic_planes(
-                        motion, float(times[k]), v, body_tex, head_tex, target_tex, bodies
+                        motion,
+                        float(times[k]),
+                        v,
+                        body_tex,
+                        head_tex,
+                        target_tex,
+                        bodies,
+                        head_up=head_up,
                     )
                     if faces:
                         face_vis[k], face_px[k] = _face_visibility(
