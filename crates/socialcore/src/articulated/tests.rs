@@ -288,7 +288,9 @@ fn start_selection_trades_cost_against_smoothness() {
     // standard deviation of the cost √166 ≈ 12.9 px². Weight 2: a tenfold smoother start
     // may cost up to 25.8 px² more.
     let base = (83.0, 1e-3);
-    let cases: [(&[(f64, f64)], Option<f64>, Option<usize>, &str); 10] = [
+    // (starts as (cost, roughness), weight, expected pick, what).
+    type Case<'a> = (&'a [(f64, f64)], Option<f64>, Option<usize>, &'a str);
+    let cases: [Case; 10] = [
         (
             &[base, (95.0, 1e-4)],
             Some(2.0),
