@@ -392,11 +392,12 @@ def test_robust_start_selection_on_markers() -> None:
     # Fig 4.3(c) conditions on another clip (optical markers), the joints with η_a > 1.25,
     # pooled over two noise draws. The pixels cannot tell the truth's basin from the
     # impostor's (after the refinement of Eq 4.5 the impostor often reprojects a few px²
-    # better), so the robust method keeps a clearly smoother start that the pixels cannot
-    # reject. Measured per draw (seeds 0–3, 31 joints): mean 0.206 0.299 0.307 0.221, median
-    # 0.067–0.085, 68–77 % of joints below 0.15; keeping the lowest cost (select_tol=0):
-    # mean 0.300 0.303 0.346 0.220 (so robust / lowest cost = 0.84 on seeds 0–1, 0.93 on
-    # 2–3); the thesis method: 0.285–0.328.
+    # better), so the robust method trades the reprojection cost against the smoothness of
+    # Eq 4.12 (smooth_weight). Measured per draw (seeds 0–3, 31 joints): mean 0.192 0.310
+    # 0.260 0.215, median 0.066–0.086, 68–81 % of joints below 0.15; keeping the lowest
+    # cost (smooth_weight=0): mean 0.300 0.303 0.346 0.220, so robust / lowest cost = 0.83
+    # on seeds 0–1 and 0.84 on 2–3 (smooth_weight=2: 0.72 and 0.64; the earlier tolerance
+    # rule: 0.84 and 0.93); the thesis method 0.285–0.328.
     P, pairs, cams, px = _marker_window()
     F = P.shape[0]
     errs: dict[str, list[float]] = {"robust": [], "mincost": []}
@@ -409,12 +410,12 @@ def test_robust_start_selection_on_markers() -> None:
         x[rng.random(F) < 0.05] = np.nan
         parent = P[:, p] + _smooth_offset(F, 0.05 * r, rng)
         den = np.linalg.norm(P[:, j] - P[:, p])
-        for name, kw in (("robust", {}), ("mincost", {"select_tol": 0.0})):
+        for name, kw in (("robust", {}), ("mincost", {"smooth_weight": 0.0})):
             out = sc.reconstruct_articulated(x, cams, parent, 1.05 * r, k=8, **kw)
             errs[name].append(float(np.linalg.norm(out.points - P[:, j]) / den))
     robust = np.array(errs["robust"])
     assert len(robust) >= 50, len(robust)
-    assert robust.mean() < 0.33, errs["robust"]
+    assert robust.mean() < 0.29, errs["robust"]
     assert np.median(robust) < 0.1, errs["robust"]
     assert np.mean(robust < 0.15) >= 0.6, errs["robust"]
-    assert robust.mean() < 0.95 * np.mean(errs["mincost"]), errs
+    assert robust.mean() < 0.9 * np.mean(errs["mincost"]), errs

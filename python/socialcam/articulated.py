@@ -256,9 +256,8 @@ class ArticulatedOptions:
         to the other and follows the impostor. ``"robust"`` also solves the program on a
         sphere shrunk to the ``tangent_quantile`` of the parent-to-ray distances (the
         near-grazing rays then touch it once, both roots' evidence merged), refines each
-        start with the bone length free within ``length_tol``, and keeps the start with
-        the lowest reprojection error unless a clearly smoother one fits the pixels as
-        well (``select_tol``).
+        start with the bone length free within ``length_tol``, and keeps the start that
+        best trades reprojection error against smoothness (``smooth_weight``).
     fit_radius : set the thesis sphere to the largest parent-to-ray distance instead of
         only enlarging the given length when a ray misses.
     tangent_quantile : robust method: quantile in [0, 1] of the parent-to-ray distances
@@ -273,13 +272,14 @@ class ArticulatedOptions:
         touch and come back: both are refined and the lower reprojection error kept.
     flip_rounds : robust method: rounds of the greedy search over those passes (≥ 0; each
         round keeps the single pass that lowers the reprojection error most).
-    select_tol : robust method: the refined starts (both spheres, every pass tried) whose
-        reprojection cost is within ``select_tol`` standard deviations of the lowest (a χ²
-        at the noise level estimated from the lowest) cannot be told apart by the pixels —
-        on real motion the impostor often fits them slightly better — so the one whose unit
-        directions are smoothest in the basis (the objective of Eq 4.12, on the refined
-        trajectory) is kept if its roughness is below 0.2 × that of the lowest-cost start;
-        ≥ 0, 0 keeps the lowest cost.
+    smooth_weight : robust method: how much smoothness counts against the pixels when
+        choosing among the refined starts (both spheres, every pass tried); ≥ 0. Each start
+        scores its reprojection cost above the lowest, in standard deviations of that cost
+        (a χ² at the noise level estimated from the lowest), plus ``smooth_weight × log₁₀``
+        of its roughness (the objective of Eq 4.12 on its refined unit directions); the
+        lowest score wins. So a start ten times smoother may fit the pixels worse by up to
+        ``smooth_weight`` standard deviations — on real motion the impostor often fits them
+        slightly better. 0 keeps the lowest cost.
     max_iter : Levenberg–Marquardt iterations of the refinement (≥ 1).
     time_limit : seconds per binary program (the best incumbent is used after it), or
         ``None``.
@@ -295,7 +295,7 @@ class ArticulatedOptions:
     length_tol: float = 0.1
     grazing_separation: float = 1.0
     flip_rounds: int = 3
-    select_tol: float = 1.5
+    smooth_weight: float = 1.0
     max_iter: int = 100
     time_limit: float | None = None
     node_limit: int | None = DEFAULT_NODE_LIMIT
@@ -310,7 +310,7 @@ class ArticulatedOptions:
         check_float(self.length_tol, "length_tol", min=0.0, max=10.0)
         check_float(self.grazing_separation, "grazing_separation", min=0.0, max=2.0)
         check_int(self.flip_rounds, "flip_rounds", min=0, max=100)
-        check_float(self.select_tol, "select_tol", min=0.0, max=1e6)
+        check_float(self.smooth_weight, "smooth_weight", min=0.0, max=1e6)
         check_int(self.max_iter, "max_iter", min=1, max=100_000)
         if self.time_limit is not None:
             check_float(self.time_limit, "time_limit", min=0.0, max=1e9)

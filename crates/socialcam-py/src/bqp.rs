@@ -192,7 +192,7 @@ struct PyArticulatedOptions {
     #[pyo3(attribute)]
     flip_rounds: usize,
     #[pyo3(attribute)]
-    select_tol: f64,
+    smooth_weight: f64,
     #[pyo3(attribute)]
     max_iter: usize,
     #[pyo3(attribute)]
@@ -221,7 +221,7 @@ fn art_options(o: &PyArticulatedOptions) -> PyResult<ArticulatedOptions> {
         length_tol: o.length_tol,
         grazing_separation: o.grazing_separation,
         flip_rounds: o.flip_rounds,
-        select_tol: o.select_tol,
+        smooth_weight: o.smooth_weight,
         lm: socialcore::geometry::LmOptions {
             max_iterations: o.max_iter,
             ..defaults.lm

@@ -283,30 +283,61 @@ fn skeleton_chain_recursive() {
 }
 
 #[test]
-fn start_selection_needs_indistinguishable_cost_and_clearly_smoother() {
-    // 50 observations, k = 8: 83 degrees of freedom; lowest cost 83 → σ² = 1 and the
-    // tolerance 1.5 · √166 ≈ 19.3 px².
+fn start_selection_trades_cost_against_smoothness() {
+    // 50 observations, k = 8: 83 degrees of freedom; lowest cost 83 → σ² = 1 and one
+    // standard deviation of the cost √166 ≈ 12.9 px². Weight 2: a tenfold smoother start
+    // may cost up to 25.8 px² more.
     let base = (83.0, 1e-3);
-    // Within the tolerance and 10× smoother: taken.
-    assert_eq!(
-        select_start(&[base, (95.0, 1e-4)], 50, 8, Some(1.5)),
-        Some(1)
-    );
-    // Outside the tolerance: the pixels reject it.
-    assert_eq!(
-        select_start(&[base, (110.0, 1e-4)], 50, 8, Some(1.5)),
-        Some(0)
-    );
-    // Only a little smoother (above SMOOTHER × the lowest-cost roughness): not enough.
-    assert_eq!(
-        select_start(&[base, (84.0, 0.5e-3)], 50, 8, Some(1.5)),
-        Some(0)
-    );
-    // Selection off (thesis method, or select_tol = 0): the lowest cost.
-    assert_eq!(select_start(&[base, (84.0, 1e-5)], 50, 8, None), Some(0));
-    assert_eq!(
-        select_start(&[(90.0, 1e-5), base], 50, 8, Some(0.0)),
-        Some(1)
-    );
-    assert_eq!(select_start(&[], 50, 8, Some(1.5)), None);
+    // (starts as (cost, roughness), weight, expected pick, what).
+    type Case<'a> = (&'a [(f64, f64)], Option<f64>, Option<usize>, &'a str);
+    let cases: [Case; 10] = [
+        (
+            &[base, (95.0, 1e-4)],
+            Some(2.0),
+            Some(1),
+            "12 px² worse, 10× smoother",
+        ),
+        (
+            &[base, (113.0, 1e-4)],
+            Some(2.0),
+            Some(0),
+            "30 px² worse: rejected",
+        ),
+        (
+            &[base, (123.0, 1e-5)],
+            Some(2.0),
+            Some(1),
+            "40 px² worse, 100× smoother",
+        ),
+        (
+            &[base, (93.0, 0.5e-3)],
+            Some(2.0),
+            Some(0),
+            "10 px² worse, twice as smooth",
+        ),
+        (
+            &[base, (80.0, 1e-4)],
+            Some(0.5),
+            Some(1),
+            "smoother and lower cost",
+        ),
+        (
+            &[(83.0, 1e-9), (84.0, 1e-12)],
+            Some(2.0),
+            Some(0),
+            "below the floor",
+        ),
+        (&[base, (84.0, 1e-5)], None, Some(0), "selection off"),
+        (&[(90.0, 1e-5), base], Some(0.0), Some(1), "weight 0"),
+        (
+            &[(83.0, f64::NAN), (90.0, 1e-3)],
+            Some(2.0),
+            Some(1),
+            "NaN roughness",
+        ),
+        (&[], Some(2.0), None, "no start"),
+    ];
+    for (starts, weight, want, what) in cases {
+        assert_eq!(select_start(starts, 50, 8, weight), want, "{what}");
+    }
 }
