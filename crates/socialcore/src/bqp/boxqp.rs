@@ -272,23 +272,45 @@ pub(crate) fn cholesky_solve(
 /// Lower Cholesky factor in place (row-major, lower triangle read and written). False if a
 /// pivot is not positive or `clock` runs out (checked every 32 rows).
 pub(crate) fn cholesky_in_place(l: &mut [f64], r: usize, clock: Option<&Clock>) -> bool {
+    super::with_avx2(|| cholesky_generic(l, r, clock))
+}
+
+#[inline(always)]
+fn cholesky_generic(l: &mut [f64], r: usize, clock: Option<&Clock>) -> bool {
     for i in 0..r {
         if i % 32 == 31 && clock.is_some_and(Clock::out) {
             return false;
         }
+        let (done, rest) = l.split_at_mut(i * r);
+        let row_i = &mut rest[..r];
         for j in 0..=i {
-            let (ri, rj) = (i * r, j * r);
-            let mut s = l[ri + j];
-            for k in 0..j {
-                s -= l[ri + k] * l[rj + k];
-            }
+            // Four partial sums: a dot product the compiler can vectorise.
+            let dot = |a: &[f64], b: &[f64]| {
+                let mut acc = [0.0f64; 4];
+                let (ca, cb) = (a.chunks_exact(4), b.chunks_exact(4));
+                let tail: f64 = ca
+                    .remainder()
+                    .iter()
+                    .zip(cb.remainder())
+                    .map(|(x, y)| x * y)
+                    .sum();
+                for (x, y) in ca.zip(cb) {
+                    for t in 0..4 {
+                        acc[t] += x[t] * y[t];
+                    }
+                }
+                (acc[0] + acc[1]) + (acc[2] + acc[3]) + tail
+            };
             if i == j {
+                let s = row_i[i] - dot(&row_i[..i], &row_i[..i]);
                 if s <= 0.0 || !s.is_finite() {
                     return false;
                 }
-                l[ri + i] = s.sqrt();
+                row_i[i] = s.sqrt();
             } else {
-                l[ri + j] = s / l[rj + j];
+                let row_j = &done[j * r..j * r + j + 1];
+                let s = row_i[j] - dot(&row_i[..j], &row_j[..j]);
+                row_i[j] = s / row_j[j];
             }
         }
     }

@@ -61,6 +61,7 @@ impl Mixing {
     }
 
     /// `g = Σ_j C_ij v_j` for the free row `i` (or the homogenising row `i = n`).
+    #[inline(always)]
     fn row_gradient(&mut self, model: &Model, fix: &[i8], i: usize) -> f64 {
         let (n, k) = (model.n, self.k);
         self.g.fill(0.0);
@@ -107,60 +108,63 @@ impl Mixing {
         clock: &Clock,
         s: &mut [f64],
     ) -> usize {
-        let (n, k) = (model.n, self.k);
-        for i in 0..n {
-            self.lin[i] = if fix[i] == FREE {
-                let mut acc = model.h[i];
-                for &(j, w) in &model.adj[i] {
-                    match fix[j] {
-                        FREE => acc += w,
-                        1 => acc += 2.0 * w,
-                        _ => {}
+        // The sweeps are k-wide axpys: vectorised by `with_avx2`.
+        super::with_avx2(|| {
+            let (n, k) = (model.n, self.k);
+            for i in 0..n {
+                self.lin[i] = if fix[i] == FREE {
+                    let mut acc = model.h[i];
+                    for &(j, w) in &model.adj[i] {
+                        match fix[j] {
+                            FREE => acc += w,
+                            1 => acc += 2.0 * w,
+                            _ => {}
+                        }
                     }
-                }
-                0.25 * acc
-            } else {
-                0.0
-            };
-        }
-        let mut prev = f64::INFINITY;
-        let mut sweeps = 0;
-        while sweeps < max_sweeps {
-            sweeps += 1;
-            let mut obj = 0.0;
-            for i in 0..=n {
-                if i < n && fix[i] != FREE {
-                    continue;
-                }
-                let norm = self.row_gradient(model, fix, i);
-                self.gnorm[i] = norm;
-                if norm > 0.0 {
-                    let vi = &mut self.v[i * k..(i + 1) * k];
-                    for (va, ga) in vi.iter_mut().zip(&self.g) {
-                        *va = -ga / norm;
+                    0.25 * acc
+                } else {
+                    0.0
+                };
+            }
+            let mut prev = f64::INFINITY;
+            let mut sweeps = 0;
+            while sweeps < max_sweeps {
+                sweeps += 1;
+                let mut obj = 0.0;
+                for i in 0..=n {
+                    if i < n && fix[i] != FREE {
+                        continue;
                     }
+                    let norm = self.row_gradient(model, fix, i);
+                    self.gnorm[i] = norm;
+                    if norm > 0.0 {
+                        let vi = &mut self.v[i * k..(i + 1) * k];
+                        for (va, ga) in vi.iter_mut().zip(&self.g) {
+                            *va = -ga / norm;
+                        }
+                    }
+                    // ⟨C, VVᵀ⟩ = Σ_i v_i·g_i, and v_i·g_i = −|g_i| after the update
+                    // (approximately: earlier rows' g are stale; fine for a stopping test).
+                    obj -= norm;
                 }
-                // ⟨C, VVᵀ⟩ = Σ_i v_i·g_i, and v_i·g_i = −|g_i| after the update
-                // (approximately: earlier rows' g are stale; fine for a stopping test).
-                obj -= norm;
+                if (prev - obj).abs() <= tol * obj.abs().max(1.0) {
+                    break;
+                }
+                prev = obj;
+                if sweeps % 4 == 0 && clock.out() {
+                    break;
+                }
             }
-            if (prev - obj).abs() <= tol * obj.abs().max(1.0) {
-                break;
+            // Final multipliers from the converged (or last) V.
+            for i in 0..n {
+                s[i] = if fix[i] == FREE {
+                    4.0 * self.row_gradient(model, fix, i)
+                } else {
+                    0.0
+                };
             }
-            prev = obj;
-            if sweeps % 4 == 0 && clock.out() {
-                break;
-            }
-        }
-        // Final multipliers from the converged (or last) V.
-        for i in 0..n {
-            s[i] = if fix[i] == FREE {
-                4.0 * self.row_gradient(model, fix, i)
-            } else {
-                0.0
-            };
-        }
-        sweeps
+            sweeps
+        })
     }
 }
 

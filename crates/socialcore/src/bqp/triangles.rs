@@ -125,14 +125,17 @@ pub(crate) fn lagrangian_model(base: &Model, cuts: &[(Cut, f64)]) -> Model {
         }
         m.k0 += gamma * d;
     }
-    m.adj = (0..n)
-        .map(|i| {
-            (0..n)
-                .filter(|&j| j != i && m.w[i * n + j] != 0.0)
-                .map(|j| (j, m.w[i * n + j]))
-                .collect()
-        })
-        .collect();
+    m.adj =
+        m.w.chunks_exact(n)
+            .enumerate()
+            .map(|(i, row)| {
+                // Counted first: one exact allocation per row (this runs several times a node).
+                let nz = |&(j, v): &(usize, &f64)| j != i && *v != 0.0;
+                let mut a = Vec::with_capacity(row.iter().enumerate().filter(nz).count());
+                a.extend(row.iter().enumerate().filter(nz).map(|(j, v)| (j, *v)));
+                a
+            })
+            .collect();
     m
 }
 
@@ -190,8 +193,8 @@ pub(crate) fn refine(
     for _ in 0..steps {
         let model = lagrangian_model(base, &cuts);
         mix.solve(&model, fix, REFINE_SWEEPS, 1e-6, clock, &mut s);
-        primal(n, mix, fix, &mut x, &mut p);
         if max_new > 0 {
+            primal(n, mix, fix, &mut x, &mut p);
             let index: HashMap<Cut, usize> =
                 cuts.iter().enumerate().map(|(t, (c, _))| (*c, t)).collect();
             let mut tol = SEPARATION_TOL;
@@ -199,9 +202,50 @@ pub(crate) fn refine(
                 cuts.push((c, 0.0));
             }
         }
+        if max_new == 0 {
+            // Only the pairs of the cuts are read: fill those, not all n² of them.
+            primal_of_cuts(n, mix, fix, &cuts, &mut x, &mut p);
+        }
         subgradient_step(&mut cuts, &x, &p, n, 0.5 * gap);
     }
     cuts
+}
+
+/// [`primal`] restricted to `x̂` and the entries of `p̂` that the `cuts` read.
+fn primal_of_cuts(
+    n: usize,
+    mix: &Mixing,
+    fix: &[i8],
+    cuts: &[(Cut, f64)],
+    x: &mut [f64],
+    p: &mut [f64],
+) {
+    let k = mix.k;
+    let v = &mix.v;
+    let row = |i: usize| &v[i * k..(i + 1) * k];
+    let dot = |a: &[f64], b: &[f64]| a.iter().zip(b).map(|(u, w)| u * w).sum::<f64>();
+    let y0: Vec<f64> = (0..n).map(|i| dot(row(i), row(n))).collect();
+    for i in 0..n {
+        x[i] = if fix[i] == FREE {
+            0.5 * (1.0 + y0[i])
+        } else {
+            f64::from(fix[i])
+        };
+    }
+    for (cut, _) in cuts {
+        for (a, b, c) in cut.terms().1 {
+            if c == 0.0 {
+                continue;
+            }
+            let pab = if fix[a] == FREE && fix[b] == FREE {
+                0.25 * (1.0 + y0[a] + y0[b] + dot(row(a), row(b)))
+            } else {
+                x[a] * x[b]
+            };
+            p[a * n + b] = pab;
+            p[b * n + a] = pab;
+        }
+    }
 }
 
 /// `γ ← max(0, γ + step·g)` with Polyak's step `target/‖g‖²` (projected components left
@@ -240,68 +284,85 @@ fn separate(
     max_new: usize,
     tol: &mut f64,
 ) -> Vec<Cut> {
-    let mut found: Vec<(f64, Cut)> = Vec::new();
-    let t = *tol;
-    let mut push = |cut: Cut, g: f64| {
-        if g > t {
-            found.push((g, cut));
-        }
-    };
-    for i in 0..n {
-        for j in (i + 1)..n {
-            let pij = p[i * n + j];
-            let (xi, xj) = (x[i], x[j]);
-            let pair = |kind| Cut {
-                kind,
-                i: i as u32,
-                j: j as u32,
-                k: 0,
-            };
-            push(pair(4), -pij);
-            push(pair(5), pij - xi);
-            push(pair(6), pij - xj);
-            push(pair(7), xi + xj - pij - 1.0);
-            for k in (j + 1)..n {
-                let (pik, pjk, xk) = (p[i * n + k], p[j * n + k], x[k]);
-                let g = [
-                    xi + xj + xk - pij - pik - pjk - 1.0,
-                    pij + pik - pjk - xi,
-                    pij + pjk - pik - xj,
-                    pik + pjk - pij - xk,
-                ];
-                // Most triples violate nothing: one test for the four.
-                if g[0].max(g[1]).max(g[2].max(g[3])) <= t {
-                    continue;
+    super::with_avx2(|| {
+        let mut found: Vec<(f64, Cut)> = Vec::new();
+        let t = *tol;
+        let mut worst = vec![0.0; n];
+        let mut push = |cut: Cut, g: f64| {
+            if g > t {
+                found.push((g, cut));
+            }
+        };
+        for i in 0..n {
+            for j in (i + 1)..n {
+                let pij = p[i * n + j];
+                let (xi, xj) = (x[i], x[j]);
+                let pair = |kind| Cut {
+                    kind,
+                    i: i as u32,
+                    j: j as u32,
+                    k: 0,
+                };
+                push(pair(4), -pij);
+                push(pair(5), pij - xi);
+                push(pair(6), pij - xj);
+                push(pair(7), xi + xj - pij - 1.0);
+                // Largest of the four triangle violations for every k > j in one pass over
+                // rows i and j (no branches: vectorisable); most triples violate nothing.
+                let (pi, pj) = (
+                    &p[i * n + j + 1..(i + 1) * n],
+                    &p[j * n + j + 1..(j + 1) * n],
+                );
+                let worst = &mut worst[..n - j - 1];
+                for (((w, &pik), &pjk), &xk) in worst.iter_mut().zip(pi).zip(pj).zip(&x[j + 1..]) {
+                    let g0 = xi + xj + xk - pij - pik - pjk - 1.0;
+                    let g1 = pij + pik - pjk - xi;
+                    let g2 = pij + pjk - pik - xj;
+                    let g3 = pik + pjk - pij - xk;
+                    *w = g0.max(g1).max(g2.max(g3));
                 }
-                for (kind, gk) in g.into_iter().enumerate() {
-                    let cut = Cut {
-                        kind: kind as u8,
-                        i: i as u32,
-                        j: j as u32,
-                        k: k as u32,
-                    };
-                    push(cut, gk);
+                for (d, &wk) in worst.iter().enumerate() {
+                    if wk <= t {
+                        continue;
+                    }
+                    let k = j + 1 + d;
+                    let (pik, pjk, xk) = (pi[d], pj[d], x[k]);
+                    let g = [
+                        xi + xj + xk - pij - pik - pjk - 1.0,
+                        pij + pik - pjk - xi,
+                        pij + pjk - pik - xj,
+                        pik + pjk - pij - xk,
+                    ];
+                    for (kind, gk) in g.into_iter().enumerate() {
+                        let cut = Cut {
+                            kind: kind as u8,
+                            i: i as u32,
+                            j: j as u32,
+                            k: k as u32,
+                        };
+                        push(cut, gk);
+                    }
                 }
             }
         }
-    }
-    // Active cuts are kept apart from the new ones after the selection (fewer look-ups).
-    let room = max_new + active.len();
-    if found.len() > room {
-        let crowded = found.len() > 4 * room;
-        found.select_nth_unstable_by(room, |a, b| b.0.total_cmp(&a.0));
-        found.truncate(room);
-        if crowded {
-            let weakest = found.iter().map(|f| f.0).fold(f64::INFINITY, f64::min);
-            *tol = (0.5 * weakest).max(SEPARATION_TOL);
+        // Active cuts are kept apart from the new ones after the selection (fewer look-ups).
+        let room = max_new + active.len();
+        if found.len() > room {
+            let crowded = found.len() > 4 * room;
+            found.select_nth_unstable_by(room, |a, b| b.0.total_cmp(&a.0));
+            found.truncate(room);
+            if crowded {
+                let weakest = found.iter().map(|f| f.0).fold(f64::INFINITY, f64::min);
+                *tol = (0.5 * weakest).max(SEPARATION_TOL);
+            }
+        } else {
+            *tol = (0.25 * *tol).max(SEPARATION_TOL);
         }
-    } else {
-        *tol = (0.25 * *tol).max(SEPARATION_TOL);
-    }
-    found.retain(|(_, c)| !active.contains_key(c));
-    found.sort_by(|a, b| b.0.total_cmp(&a.0).then_with(|| key(&a.1).cmp(&key(&b.1))));
-    found.truncate(max_new);
-    found.into_iter().map(|(_, c)| c).collect()
+        found.retain(|(_, c)| !active.contains_key(c));
+        found.sort_by(|a, b| b.0.total_cmp(&a.0).then_with(|| key(&a.1).cmp(&key(&b.1))));
+        found.truncate(max_new);
+        found.into_iter().map(|(_, c)| c).collect()
+    })
 }
 
 /// Valid root bound of `model`: its mixing shift `s` repaired to positive definiteness with
@@ -323,13 +384,19 @@ fn valid_bound(model: &mut Model, s: &[f64], solver: &mut BoxQp, clock: &Clock) 
 }
 
 /// Iterations of the multiplier ascent at the root, and how often the valid bound is
-/// evaluated (an eigenvalue decomposition and a box relaxation each).
-const ITERS: usize = 60;
-const EVAL_EVERY: usize = 5;
+/// evaluated (an eigenvalue decomposition and a box relaxation each) and new cuts are
+/// separated (an O(n³) scan). Many cheap steps (warm-started, few sweeps each) beat few
+/// accurate ones: on Beasley n = 100, seeds 0–9, 80 steps of 8 sweeps (separating every
+/// other step, evaluating every tenth) gave 1,191 nodes in 2.1 s CPU against 1,275 nodes in
+/// 4.9 s with 60 steps of 30 sweeps (separating and evaluating every fifth).
+const ITERS: usize = 80;
+const EVAL_EVERY: usize = 10;
+const SEPARATE_EVERY: usize = 2;
 /// Smallest violation for which a cut is separated.
 const SEPARATION_TOL: f64 = 1e-3;
-/// Mixing sweeps per iteration (warm-started).
-const SWEEPS: usize = 30;
+/// Mixing sweeps per iteration (warm-started), and at the first (from a random factor).
+const SWEEPS: usize = 8;
+const FIRST_SWEEPS: usize = 100;
 /// Mixing sweeps per multiplier step at a node (warm-started).
 const REFINE_SWEEPS: usize = 12;
 /// Multiplier steps per node. Beasley n = 100, seeds 0–9: 25–277 nodes with 3, against
@@ -367,7 +434,10 @@ pub(crate) fn strengthen(
             break;
         }
         let mut model = lagrangian_model(base, &cuts);
-        mix.solve(&model, &free, SWEEPS, 1e-7, clock, &mut s);
+        // The first solve starts from a random factor: converge it (the first subgradient
+        // must come from the SDP optimum); later ones are warm.
+        let sweeps = if it == 0 { FIRST_SWEEPS } else { SWEEPS };
+        mix.solve(&model, &free, sweeps, 1e-7, clock, &mut s);
         if it % EVAL_EVERY == EVAL_EVERY - 1 || it + 1 == ITERS {
             let Some(b) = valid_bound(&mut model, &s, &mut solver, clock) else {
                 break;
@@ -387,8 +457,14 @@ pub(crate) fn strengthen(
                 break;
             }
         }
-        primal(n, &mix, &free, &mut x, &mut p);
-        for c in separate(n, &x, &p, &index, n, &mut tol) {
+        let sep = if it % SEPARATE_EVERY == 0 {
+            primal(n, &mix, &free, &mut x, &mut p);
+            separate(n, &x, &p, &index, n, &mut tol)
+        } else {
+            primal_of_cuts(n, &mix, &free, &cuts, &mut x, &mut p);
+            Vec::new()
+        };
+        for c in sep {
             index.insert(c, cuts.len());
             cuts.push((c, 0.0));
         }
