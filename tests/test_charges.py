@@ -87,6 +87,9 @@ def test_charge_options_are_one_frozen_validated_dataclass():
         ({"depth_range": (0.0, 5.0)}, "depth_range"),
         ({"bounds": ((0, 0, 0), (1, -1, 1))}, "bounds"),
         ({"newton": "yes"}, "newton"),
+        ({"joint_window": 1}, "joint_window"),
+        ({"switch_cost": -1.0}, "switch_cost"),
+        ({"switch_cost": float("inf")}, "switch_cost"),
     ]:
         with pytest.raises(ValueError, match=f"^{name}:"):
             sc.ChargeOptions(**bad)

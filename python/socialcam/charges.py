@@ -328,6 +328,8 @@ class ChargeOptions:
     bounds: tuple[tuple[float, float, float], tuple[float, float, float]] | None = None
     pool_frames: int = 10
     drift: float = 0.05
+    joint_window: bool = True
+    switch_cost: float = float(np.log(30.0))
     region_level: float = 0.8
     region_max_radius: float = 10.0
 
@@ -341,7 +343,7 @@ class ChargeOptions:
         lo = check_float(dr[0], "depth_range", min=0.0, min_exclusive=True)
         hi = check_float(dr[1], "depth_range", min=lo)
         object.__setattr__(self, "depth_range", (lo, hi))
-        for name in ("pair_seeds", "newton"):
+        for name in ("pair_seeds", "newton", "joint_window"):
             if not isinstance(getattr(self, name), (bool, np.bool_)):
                 raise ValueError(f"{name}: expected True or False, got {getattr(self, name)!r}")
             object.__setattr__(self, name, bool(getattr(self, name)))
@@ -366,12 +368,13 @@ class ChargeOptions:
             object.__setattr__(self, "bounds", (tuple(blo.tolist()), tuple(bhi.tolist())))
         check_int(self.pool_frames, "pool_frames", min=0, max=1 << 31)
         check_float(self.drift, "drift", min=0.0)
+        check_float(self.switch_cost, "switch_cost", min=0.0)
         check_float(self.region_level, "region_level", min=0.0, min_exclusive=True, max=1.0)
         if self.region_level >= 1.0:
             raise ValueError(f"region_level: expected a number < 1, got {self.region_level}")
         check_float(self.region_max_radius, "region_max_radius", min=0.0, min_exclusive=True)
         for name in ("tol", "merge_radius", "member_sigma", "charge_penalty", "unattended", "min_magnitude",
-                     "drift", "region_level", "region_max_radius"):  # fmt: skip
+                     "drift", "switch_cost", "region_level", "region_max_radius"):  # fmt: skip
             object.__setattr__(self, name, float(getattr(self, name)))
         for name in ("seeds_per_ray", "max_iter", "min_members", "pool_frames"):
             object.__setattr__(self, name, int(getattr(self, name)))
@@ -392,10 +395,11 @@ def _run(frames: Sequence[GazeRays], seed: int, options: ChargeOptions) -> list[
     p = np.concatenate([f.p for f in frames])
     v = np.concatenate([f.v for f in frames])
     h = np.concatenate([f.h for f in frames])
+    ids = np.concatenate([f.ids for f in frames])
     counts = np.array([len(f) for f in frames], dtype=np.int64)
     offsets = np.concatenate([[0], np.cumsum(counts)]).astype(np.int64)
     (frame, pos, mag, sup, mem, mem_off, membership, centre, axes, radii) = _core.find_charges(
-        p, v, h, offsets, check_seed(seed), options
+        p, v, h, offsets, check_seed(seed), options, ids=ids
     )
     # Ragged pieces, split with one numpy call each.
     mem_split = np.split(mem, mem_off[1:-1]) if len(frame) else []

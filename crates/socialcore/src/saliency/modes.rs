@@ -67,12 +67,24 @@ pub struct ModeOptions {
     /// walk: a neighbour `k` frames away contributes with its uncertainty plus
     /// `(drift·k)²` per axis.
     pub drift: f64,
+    /// [`Membership::Partition`] in [`find_charges_sequence`] with `pool_frames > 0`: a
+    /// third pass decides the charges of all frames jointly (see the `window` module):
+    /// targets persist as sources, each person's attention changes rarely, and a frame the
+    /// gaze model cannot resolve alone is resolved with its neighbours.
+    pub joint_window: bool,
+    /// Cost (nats) of a person changing target in [`ModeOptions::joint_window`]: `ln(1/q)`
+    /// for a change probability `q` per frame.
+    pub switch_cost: f64,
     /// The confidence region is where the field exceeds `region_level` times the mode
     /// value (Sec 6.2.1 uses 0.8).
     pub region_level: f64,
     /// The region's semi-axes are capped at this many metres.
     pub region_max_radius: f64,
 }
+
+/// Default [`ModeOptions::switch_cost`]: `ln 30`, a change of target every 30 frames (3 s
+/// at 10 fps) a priori.
+pub const SWITCH_COST: f64 = 3.401_197_381_662_155;
 
 impl Default for ModeOptions {
     fn default() -> Self {
@@ -94,6 +106,8 @@ impl Default for ModeOptions {
             bounds: None,
             pool_frames: 10,
             drift: 0.05,
+            joint_window: true,
+            switch_cost: SWITCH_COST,
             region_level: 0.8,
             region_max_radius: 10.0,
         }
@@ -167,6 +181,12 @@ impl ModeOptions {
         }
         if !(self.drift.is_finite() && self.drift >= 0.0) {
             return bad("drift", format!("{} must be finite and ≥ 0", self.drift));
+        }
+        if !(self.switch_cost.is_finite() && self.switch_cost >= 0.0) {
+            return bad(
+                "switch_cost",
+                format!("{} must be finite and ≥ 0", self.switch_cost),
+            );
         }
         if !(self.region_level > 0.0 && self.region_level < 1.0) {
             return bad(
@@ -949,14 +969,58 @@ pub fn find_charges_sequence(
                 .collect()
         })
         .collect();
-    frames
+    let pooled: Vec<Vec<Charge>> = frames
         .par_iter()
         .enumerate()
         .map(|(t, rays)| {
             let prior = pooled_prior(&found, t, opts);
             charges_of_frame(rays, opts, seed, false, &prior)
         })
+        .collect::<Result<_>>()?;
+    if !opts.joint_window {
+        return Ok(pooled);
+    }
+    let stage: Vec<Vec<super::window::Found>> = pooled
+        .iter()
+        .map(|cs| cs.iter().map(|c| (c.position, c.members.clone())).collect())
+        .collect();
+    let joint = super::window::joint_window(frames, &stage, opts)?;
+    frames
+        .par_iter()
+        .zip(joint)
+        .map(|(rays, found)| {
+            let mut out: Vec<Charge> = found
+                .into_iter()
+                .map(|(x, members)| charge_at(rays, x, members, opts))
+                .collect();
+            out.sort_by(|a, b| {
+                b.magnitude
+                    .total_cmp(&a.magnitude)
+                    .then_with(|| a.position.x.total_cmp(&b.position.x))
+            });
+            Ok(out)
+        })
         .collect()
+}
+
+/// The charge at `x` with member rows `members` (decided elsewhere): field value,
+/// membership feature and confidence region at `x`.
+fn charge_at(rays: &GazeRays, x: Vector3<f64>, members: Vec<usize>, opts: &ModeOptions) -> Charge {
+    let mut ch = Charge {
+        position: x,
+        magnitude: 0.0,
+        members,
+        membership: vec![0.0; rays.len()],
+        support: 0,
+        region: Ellipsoid {
+            centre: x,
+            axes: Matrix3::identity(),
+            radii: Vector3::zeros(),
+        },
+    };
+    refresh_field_terms(rays, &mut ch);
+    ch.region = confidence_region(rays, &x, ch.magnitude, opts);
+    ch
 }
 
 /// The position prior of frame `t`'s charges from the first-pass charges of the frames
