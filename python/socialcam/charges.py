@@ -264,8 +264,7 @@ class ChargeOptions:
     seeds_per_ray : mean-shift seeds per ray, stratified in depth (Sec 6.2)
     depth_range : ``(min, max)`` depth of those seeds, metres from the eye
     pair_seeds : also seed at the near-intersection of every pair of rays passing within
-        ``member_sigma`` bandwidths of each other (``"partition"``: and offer those points
-        as candidate charges) (narrow bandwidths make basins shorter
+        ``member_sigma`` bandwidths of each other (narrow bandwidths make basins shorter
         than the spacing of the stratified seeds)
     tol : a climb has converged when a step moves less than ``tol`` metres
     newton : Newton / over-relaxed steps where they raise the field (fast on elongated
@@ -283,8 +282,8 @@ class ChargeOptions:
         Occam cost per charge that scales with the bandwidths and distances (prior volume:
         the ``bounds`` box, else a cube of side ``depth_range[1]``; in a sequence, see
         ``pool_frames``) and the mixture weight ``(1 − unattended)/K`` of each attending
-        ray among ``K`` charges, found by hard EM from the mean-shift modes and the
-        near-intersections of ray pairs; ``"strongest"`` — winner-take-all: a ray counts only for the
+        ray among ``K`` charges, found by hard EM from the mean-shift modes (and, in a
+        sequence, the neighbouring frames' charges); ``"strongest"`` — winner-take-all: a ray counts only for the
         strongest mode it is within ``member_sigma`` of, and ``min_members`` applies to
         the rays still free; ``"all"`` — the thesis' rule (every mode with
         ``min_members`` rays within ``member_sigma``; a ray may count for several);
@@ -307,6 +306,23 @@ class ChargeOptions:
         tell two close groups from one. ``0``: every frame alone (as :func:`find_charges`)
     drift : how far a charge may move per frame (metres, standard deviation of a random
         walk): a neighbour ``k`` frames away is widened by ``(drift·k)²`` per axis
+    joint_window : ``"partition"`` in :func:`find_charges_sequence` with ``pool_frames > 0``
+        only: a third pass decides all frames jointly, with one likelihood over the
+        sequence. Targets persist (*sources*, moving at most by the ``drift`` random walk)
+        and so does attention: each person attends one source or none in every frame, and
+        changing target costs ``switch_cost`` nats (free between sources closer than
+        ``merge_radius``, the same target); each attending ray gains what it gains in the
+        frame rule; a source pays its Occam cost once, not once per frame. Sources start
+        as the pooled pass's charges linked over frames; a source's position in a frame
+        is the local-linear fit of the rays attending it within ``pool_frames`` frames;
+        every person's attention is decoded over the whole sequence (Viterbi), and sources
+        are dropped while the likelihood grows. A frame's charges are the sources with
+        ``min_members`` rays attending. People are followed by their ``ids``. The window
+        resolves frames that the frame alone cannot (two close targets seen from far,
+        pairs of near-parallel rays); it cannot split a target that no frame found apart
+    switch_cost : ``joint_window`` only: the cost (nats) of a person changing target,
+        ``ln(1/q)`` for a prior change probability ``q`` per frame (default ``ln 30``:
+        people keep a target for about 3 s at 10 fps)
     region_level : the confidence region is where the field exceeds this fraction of the
         charge's magnitude (Sec 6.2.1: 0.8)
     region_max_radius : cap on the region's semi-axes, metres
@@ -478,7 +494,10 @@ def find_charges_sequence(
     second pass gives each frame's charges a position prior made of the charges found in
     the ``pool_frames`` frames before and after it (see :class:`ChargeOptions`): static
     or slow targets are then resolved in frames where the frame alone cannot tell two
-    close groups from one. With ``pool_frames=0`` (or another rule) frame ``t`` of the
+    close groups from one. Then ``joint_window`` (default on) decides the charges of all
+    frames jointly: sources persist, people change target rarely (``switch_cost``), and a
+    frame is read with its neighbours; people are followed over frames by their ``ids``.
+    With ``pool_frames=0`` (or another rule) frame ``t`` of the
     result equals ``find_charges(frames[t], seed, ...)``. Each :class:`Charge` has
     ``frame = t``. ``options`` and ``overrides`` as for :func:`find_charges`.
     """

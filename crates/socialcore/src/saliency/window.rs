@@ -41,6 +41,11 @@ const LINK_GATE: f64 = 16.0;
 const LINK_NEAR: f64 = 1.0;
 /// Smallest depth (metres) in a ray's weight.
 const MIN_DEPTH: f64 = 0.1;
+/// Depth (metres) of a ray's weight before a source has a position.
+const DEFAULT_DEPTH: f64 = 3.0;
+/// Most reweightings of a position fit (they stop when it moves less than [`FIT_TOL`]).
+const REWEIGHTINGS: usize = 10;
+const FIT_TOL: f64 = 1e-6;
 /// Condition number above which a source's rays do not fix its position.
 const MAX_CONDITION: f64 = 1e10;
 
@@ -68,9 +73,10 @@ type Positions = Vec<Vec<Option<(Vector3<f64>, Matrix3<f64>)>>>;
 type Assign = Vec<Vec<Option<usize>>>;
 
 impl Model<'_> {
-    /// Links the per-frame charges `stage` (member rows) into sources; returns the
-    /// assignment they imply.
-    fn link(frames: &[GazeRays], stage: &[Vec<Found>], drift: f64) -> (Assign, usize) {
+    /// Links the per-frame charges `stage` (member rows) into sources (at most
+    /// `pool_frames` frames apart); returns the assignment they imply.
+    fn link(frames: &[GazeRays], stage: &[Vec<Found>], opts: &ModeOptions) -> (Assign, usize) {
+        let drift = opts.drift;
         struct Last {
             t: usize,
             x: Vector3<f64>,
@@ -92,7 +98,7 @@ impl Model<'_> {
             for (j, (x, cov, m)) in obs.iter().enumerate() {
                 for (k, s) in sources.iter().enumerate() {
                     let lag = t - s.t;
-                    if lag == 0 || lag > 10 {
+                    if lag == 0 || lag > opts.pool_frames {
                         continue;
                     }
                     let walk = drift * lag as f64;
@@ -161,44 +167,59 @@ impl Model<'_> {
                 if !has[lo..=hi].iter().any(|&b| b) {
                     return None;
                 }
-                let mut m = Mat6::zeros();
-                let mut b = Vec6::zeros();
-                for u in lo..=hi {
-                    if !has[u] {
-                        continue;
-                    }
-                    let rays = &self.frames[u];
-                    let lag = u as f64 - t as f64;
-                    let g = (-0.5 * (lag / tau).powi(2)).exp();
-                    let reference = prev[t].or(prev[u]).map(|(x, _)| x);
-                    for i in (0..rays.len()).filter(|&i| z[u][i] == Some(k)) {
-                        let v = &rays.v[i];
-                        let s = reference.map_or(3.0, |x| (x - rays.p[i]).dot(v).max(MIN_DEPTH));
-                        let proj = (Matrix3::identity() - v * v.transpose())
-                            * (g * rays.inv_h2[i] / (s * s));
-                        let pp = proj * rays.p[i];
-                        for (r, c, scale) in
-                            [(0, 0, 1.0), (0, 3, lag), (3, 0, lag), (3, 3, lag * lag)]
-                        {
-                            let mut blk = m.fixed_view_mut::<3, 3>(r, c);
-                            blk += proj * scale;
+                // Weighted least squares, the depths `s` of the weights `1/(s²h²)` from a
+                // reference position, then from the estimate itself.
+                let solve = |reference: &dyn Fn(usize) -> Option<Vector3<f64>>| {
+                    let mut m = Mat6::zeros();
+                    let mut b = Vec6::zeros();
+                    for u in (lo..=hi).filter(|&u| has[u]) {
+                        let rays = &self.frames[u];
+                        let lag = u as f64 - t as f64;
+                        let g = (-0.5 * (lag / tau).powi(2)).exp();
+                        let x_ref = reference(u);
+                        for i in (0..rays.len()).filter(|&i| z[u][i] == Some(k)) {
+                            let v = &rays.v[i];
+                            let s = x_ref
+                                .map_or(DEFAULT_DEPTH, |x| (x - rays.p[i]).dot(v).max(MIN_DEPTH));
+                            let proj = (Matrix3::identity() - v * v.transpose())
+                                * (g * rays.inv_h2[i] / (s * s));
+                            let pp = proj * rays.p[i];
+                            for (r, c, scale) in
+                                [(0, 0, 1.0), (0, 3, lag), (3, 0, lag), (3, 3, lag * lag)]
+                            {
+                                let mut blk = m.fixed_view_mut::<3, 3>(r, c);
+                                blk += proj * scale;
+                            }
+                            let mut top = b.fixed_rows_mut::<3>(0);
+                            top += pp;
+                            let mut bottom = b.fixed_rows_mut::<3>(3);
+                            bottom += pp * lag;
                         }
-                        let mut top = b.fixed_rows_mut::<3>(0);
-                        top += pp;
-                        let mut bottom = b.fixed_rows_mut::<3>(3);
-                        bottom += pp * lag;
+                    }
+                    for a in 3..6 {
+                        m[(a, a)] += ridge;
+                    }
+                    let inv = m.try_inverse()?;
+                    let x: Vector3<f64> = (inv * b).fixed_rows::<3>(0).into_owned();
+                    let cov: Matrix3<f64> = inv.fixed_view::<3, 3>(0, 0).into_owned();
+                    let eig = cov.symmetric_eigenvalues();
+                    let (lo_e, hi_e) = (eig.min(), eig.max());
+                    (lo_e > 0.0 && hi_e <= MAX_CONDITION * lo_e && x.iter().all(|c| c.is_finite()))
+                        .then_some((x, cov))
+                };
+                let mut est = solve(&|u| prev[t].or(prev[u]).map(|(x, _)| x))?;
+                for _ in 0..REWEIGHTINGS {
+                    let x0 = est.0;
+                    let Some(next) = solve(&|_| Some(x0)) else {
+                        break;
+                    };
+                    let moved = (next.0 - x0).norm();
+                    est = next;
+                    if moved < FIT_TOL {
+                        break;
                     }
                 }
-                for a in 3..6 {
-                    m[(a, a)] += ridge;
-                }
-                let inv = m.try_inverse()?;
-                let x: Vector3<f64> = (inv * b).fixed_rows::<3>(0).into_owned();
-                let cov: Matrix3<f64> = inv.fixed_view::<3, 3>(0, 0).into_owned();
-                let eig = cov.symmetric_eigenvalues();
-                let (lo_e, hi_e) = (eig.min(), eig.max());
-                (lo_e > 0.0 && hi_e <= MAX_CONDITION * lo_e && x.iter().all(|c| c.is_finite()))
-                    .then_some((x, cov))
+                Some(est)
             })
             .collect()
     }
@@ -424,7 +445,7 @@ pub(super) fn joint_window(
             out
         })
         .collect();
-    let (mut z, n_sources) = Model::link(frames, stage, opts.drift);
+    let (mut z, n_sources) = Model::link(frames, stage, opts);
     let volume = match &opts.bounds {
         Some((lo, hi)) => (hi - lo).iter().map(|e| e.max(1e-3)).product::<f64>(),
         None => opts.depth_max.powi(3),
