@@ -319,7 +319,10 @@ class ChargeOptions:
         are dropped while the likelihood grows. A frame's charges are the sources with
         ``min_members`` rays attending. People are followed by their ``ids``. The window
         resolves frames that the frame alone cannot (two close targets seen from far,
-        pairs of near-parallel rays); it cannot split a target that no frame found apart
+        pairs of near-parallel rays); it cannot split a target that no frame found apart,
+        and it assumes targets that move smoothly (a position is a local-linear fit over
+        ``±pool_frames`` frames): a fast, oscillating target (the party's table-tennis
+        ball) is lost, so it is off by default
     switch_cost : ``joint_window`` only: the cost (nats) of a person changing target,
         ``ln(1/q)`` for a prior change probability ``q`` per frame (default ``ln 30``:
         people keep a target for about 3 s at 10 fps)
@@ -344,7 +347,7 @@ class ChargeOptions:
     bounds: tuple[tuple[float, float, float], tuple[float, float, float]] | None = None
     pool_frames: int = 10
     drift: float = 0.05
-    joint_window: bool = True
+    joint_window: bool = False
     switch_cost: float = float(np.log(30.0))
     region_level: float = 0.8
     region_max_radius: float = 10.0
@@ -494,7 +497,7 @@ def find_charges_sequence(
     second pass gives each frame's charges a position prior made of the charges found in
     the ``pool_frames`` frames before and after it (see :class:`ChargeOptions`): static
     or slow targets are then resolved in frames where the frame alone cannot tell two
-    close groups from one. Then ``joint_window`` (default on) decides the charges of all
+    close groups from one. With ``joint_window=True`` a third pass decides the charges of all
     frames jointly: sources persist, people change target rarely (``switch_cost``), and a
     frame is read with its neighbours; people are followed over frames by their ``ids``.
     With ``pool_frames=0`` (or another rule) frame ``t`` of the

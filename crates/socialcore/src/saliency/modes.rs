@@ -106,7 +106,7 @@ impl Default for ModeOptions {
             bounds: None,
             pool_frames: 10,
             drift: 0.05,
-            joint_window: true,
+            joint_window: false,
             switch_cost: SWITCH_COST,
             region_level: 0.8,
             region_max_radius: 10.0,
@@ -1384,6 +1384,10 @@ mod tests {
         assert_eq!(seq, vec![a.clone(), a.clone()]);
         // The joint window over two copies of the frame: the same charge, at the
         // intersection of the same rays (its fit reweighted to convergence).
+        let o = ModeOptions {
+            joint_window: true,
+            ..o
+        };
         let joint = find_charges_sequence(&[rays.clone(), rays.clone()], &o, 11).unwrap();
         for cs in &joint {
             assert_eq!(cs.len(), 1);
