@@ -114,6 +114,7 @@ def find_charges(
     offsets: npt.NDArray[np.int64],
     seed: int,
     options: ChargeOptions,
+    ids: npt.NDArray[np.int64] | None = None,
 ) -> tuple[
     npt.NDArray[np.int64],
     _F64,
@@ -129,7 +130,8 @@ def find_charges(
     """Mode seeking (Eq 6.5–6.8) on the frames ``offsets (F+1,)`` of stacked rays →
     ``frame (C,)``, ``position (C,3)``, ``magnitude (C,)``, ``support (C,)``, flat
     ``members`` with ``member_offsets (C+1,)``, flat ``membership``, ``region_centre
-    (C,3)``, ``region_axes (C,3,3)``, ``region_radii (C,3)``."""
+    (C,3)``, ``region_axes (C,3,3)``, ``region_radii (C,3)``. ``ids (T,)`` person ids of
+    the rays (default: the row within the frame) follow people across frames."""
 
 def track_charges(
     features: _F64,

@@ -264,8 +264,7 @@ class ChargeOptions:
     seeds_per_ray : mean-shift seeds per ray, stratified in depth (Sec 6.2)
     depth_range : ``(min, max)`` depth of those seeds, metres from the eye
     pair_seeds : also seed at the near-intersection of every pair of rays passing within
-        ``member_sigma`` bandwidths of each other (``"partition"``: and offer those points
-        as candidate charges) (narrow bandwidths make basins shorter
+        ``member_sigma`` bandwidths of each other (narrow bandwidths make basins shorter
         than the spacing of the stratified seeds)
     tol : a climb has converged when a step moves less than ``tol`` metres
     newton : Newton / over-relaxed steps where they raise the field (fast on elongated
@@ -283,8 +282,8 @@ class ChargeOptions:
         Occam cost per charge that scales with the bandwidths and distances (prior volume:
         the ``bounds`` box, else a cube of side ``depth_range[1]``; in a sequence, see
         ``pool_frames``) and the mixture weight ``(1 − unattended)/K`` of each attending
-        ray among ``K`` charges, found by hard EM from the mean-shift modes and the
-        near-intersections of ray pairs; ``"strongest"`` — winner-take-all: a ray counts only for the
+        ray among ``K`` charges, found by hard EM from the mean-shift modes (and, in a
+        sequence, the neighbouring frames' charges); ``"strongest"`` — winner-take-all: a ray counts only for the
         strongest mode it is within ``member_sigma`` of, and ``min_members`` applies to
         the rays still free; ``"all"`` — the thesis' rule (every mode with
         ``min_members`` rays within ``member_sigma``; a ray may count for several);
@@ -307,6 +306,26 @@ class ChargeOptions:
         tell two close groups from one. ``0``: every frame alone (as :func:`find_charges`)
     drift : how far a charge may move per frame (metres, standard deviation of a random
         walk): a neighbour ``k`` frames away is widened by ``(drift·k)²`` per axis
+    joint_window : ``"partition"`` in :func:`find_charges_sequence` with ``pool_frames > 0``
+        only: a third pass decides all frames jointly, with one likelihood over the
+        sequence. Targets persist (*sources*, moving at most by the ``drift`` random walk)
+        and so does attention: each person attends one source or none in every frame, and
+        changing target costs ``switch_cost`` nats (free between sources closer than
+        ``merge_radius``, the same target); each attending ray gains what it gains in the
+        frame rule; a source pays its Occam cost once, not once per frame. Sources start
+        as the pooled pass's charges linked over frames; a source's position in a frame
+        is the local-linear fit of the rays attending it within ``pool_frames`` frames;
+        every person's attention is decoded over the whole sequence (Viterbi), and sources
+        are dropped while the likelihood grows. A frame's charges are the sources with
+        ``min_members`` rays attending. People are followed by their ``ids``. The window
+        resolves frames that the frame alone cannot (two close targets seen from far,
+        pairs of near-parallel rays); it cannot split a target that no frame found apart,
+        and it assumes targets that move smoothly (a position is a local-linear fit over
+        ``±pool_frames`` frames): a fast, oscillating target (the party's table-tennis
+        ball) is lost, so it is off by default
+    switch_cost : ``joint_window`` only: the cost (nats) of a person changing target,
+        ``ln(1/q)`` for a prior change probability ``q`` per frame (default ``ln 30``:
+        people keep a target for about 3 s at 10 fps)
     region_level : the confidence region is where the field exceeds this fraction of the
         charge's magnitude (Sec 6.2.1: 0.8)
     region_max_radius : cap on the region's semi-axes, metres
@@ -328,6 +347,8 @@ class ChargeOptions:
     bounds: tuple[tuple[float, float, float], tuple[float, float, float]] | None = None
     pool_frames: int = 10
     drift: float = 0.05
+    joint_window: bool = False
+    switch_cost: float = float(np.log(30.0))
     region_level: float = 0.8
     region_max_radius: float = 10.0
 
@@ -341,7 +362,7 @@ class ChargeOptions:
         lo = check_float(dr[0], "depth_range", min=0.0, min_exclusive=True)
         hi = check_float(dr[1], "depth_range", min=lo)
         object.__setattr__(self, "depth_range", (lo, hi))
-        for name in ("pair_seeds", "newton"):
+        for name in ("pair_seeds", "newton", "joint_window"):
             if not isinstance(getattr(self, name), (bool, np.bool_)):
                 raise ValueError(f"{name}: expected True or False, got {getattr(self, name)!r}")
             object.__setattr__(self, name, bool(getattr(self, name)))
@@ -366,12 +387,13 @@ class ChargeOptions:
             object.__setattr__(self, "bounds", (tuple(blo.tolist()), tuple(bhi.tolist())))
         check_int(self.pool_frames, "pool_frames", min=0, max=1 << 31)
         check_float(self.drift, "drift", min=0.0)
+        check_float(self.switch_cost, "switch_cost", min=0.0)
         check_float(self.region_level, "region_level", min=0.0, min_exclusive=True, max=1.0)
         if self.region_level >= 1.0:
             raise ValueError(f"region_level: expected a number < 1, got {self.region_level}")
         check_float(self.region_max_radius, "region_max_radius", min=0.0, min_exclusive=True)
         for name in ("tol", "merge_radius", "member_sigma", "charge_penalty", "unattended", "min_magnitude",
-                     "drift", "region_level", "region_max_radius"):  # fmt: skip
+                     "drift", "switch_cost", "region_level", "region_max_radius"):  # fmt: skip
             object.__setattr__(self, name, float(getattr(self, name)))
         for name in ("seeds_per_ray", "max_iter", "min_members", "pool_frames"):
             object.__setattr__(self, name, int(getattr(self, name)))
@@ -392,10 +414,11 @@ def _run(frames: Sequence[GazeRays], seed: int, options: ChargeOptions) -> list[
     p = np.concatenate([f.p for f in frames])
     v = np.concatenate([f.v for f in frames])
     h = np.concatenate([f.h for f in frames])
+    ids = np.concatenate([f.ids for f in frames])
     counts = np.array([len(f) for f in frames], dtype=np.int64)
     offsets = np.concatenate([[0], np.cumsum(counts)]).astype(np.int64)
     (frame, pos, mag, sup, mem, mem_off, membership, centre, axes, radii) = _core.find_charges(
-        p, v, h, offsets, check_seed(seed), options
+        p, v, h, offsets, check_seed(seed), options, ids=ids
     )
     # Ragged pieces, split with one numpy call each.
     mem_split = np.split(mem, mem_off[1:-1]) if len(frame) else []
@@ -474,7 +497,10 @@ def find_charges_sequence(
     second pass gives each frame's charges a position prior made of the charges found in
     the ``pool_frames`` frames before and after it (see :class:`ChargeOptions`): static
     or slow targets are then resolved in frames where the frame alone cannot tell two
-    close groups from one. With ``pool_frames=0`` (or another rule) frame ``t`` of the
+    close groups from one. With ``joint_window=True`` a third pass decides the charges of all
+    frames jointly: sources persist, people change target rarely (``switch_cost``), and a
+    frame is read with its neighbours; people are followed over frames by their ``ids``.
+    With ``pool_frames=0`` (or another rule) frame ``t`` of the
     result equals ``find_charges(frames[t], seed, ...)``. Each :class:`Charge` has
     ``frame = t``. ``options`` and ``overrides`` as for :func:`find_charges`.
     """

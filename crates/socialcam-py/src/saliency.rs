@@ -123,6 +123,10 @@ pub struct PyChargeOptions {
     #[pyo3(attribute)]
     drift: f64,
     #[pyo3(attribute)]
+    joint_window: bool,
+    #[pyo3(attribute)]
+    switch_cost: f64,
+    #[pyo3(attribute)]
     region_level: f64,
     #[pyo3(attribute)]
     region_max_radius: f64,
@@ -161,6 +165,8 @@ impl PyChargeOptions {
                 .map(|(lo, hi)| (Vector3::from(lo), Vector3::from(hi))),
             pool_frames: self.pool_frames,
             drift: self.drift,
+            joint_window: self.joint_window,
+            switch_cost: self.switch_cost,
             region_level: self.region_level,
             region_max_radius: self.region_max_radius,
         })
@@ -172,8 +178,11 @@ impl PyChargeOptions {
 /// `position (C,3)`, `magnitude (C,)`, `support (C,)`, `members` (flat ray indices within
 /// the frame) with `member_offsets (C+1,)`, `membership` (flat, `N_f` values per charge),
 /// `region_centre (C,3)`, `region_axes (C,3,3)` (columns are the axes), `region_radii (C,3)`.
+/// `ids (T,)`: person ids of the rays (default: the row within the frame), which follow
+/// people across frames.
 #[pyfunction]
-#[pyo3(signature = (p, v, h, offsets, seed, options))]
+#[pyo3(signature = (p, v, h, offsets, seed, options, ids=None))]
+#[allow(clippy::too_many_arguments)]
 fn find_charges<'py>(
     py: Python<'py>,
     p: PyReadonlyArray2<'py, f64>,
@@ -182,6 +191,7 @@ fn find_charges<'py>(
     offsets: PyReadonlyArray1<'py, i64>,
     seed: u64,
     options: Bound<'py, PyAny>,
+    ids: Option<PyReadonlyArray1<'py, i64>>,
 ) -> PyResult<ChargeArrays<'py>> {
     let options: PyChargeOptions = crate::convert::options(&options, "ChargeOptions")?;
     let opts = options.to_core()?;
@@ -205,22 +215,29 @@ fn find_charges<'py>(
             "offsets: expected a non-decreasing (F+1,) array from 0 to {n}"
         )));
     }
-    let frames: Vec<GazeRays> = off
-        .windows(2)
-        .enumerate()
-        .map(|(f, w)| {
-            let (a, b) = (w[0] as usize, w[1] as usize);
-            GazeRays::from_flat(&pf[3 * a..3 * b], &vf[3 * a..3 * b], &hf[a..b], None).map_err(
-                |e| match e {
-                    socialcore::Error::InvalidInput { arg, msg } => {
-                        socialcore::Error::invalid(arg, format!("frame {f}: {msg}"))
-                    }
-                    other => other,
-                },
-            )
-        })
-        .collect::<socialcore::Result<_>>()
-        .map_err(|e| PyErr::from(crate::errors::PyCoreError(e)))?;
+    let idf = ids_vec(ids);
+    if idf.as_ref().is_some_and(|i| i.len() != n) {
+        return Err(PyValueError::new_err(format!(
+            "ids: need one id per ray ({n}), got {}",
+            idf.as_ref().map_or(0, Vec::len)
+        )));
+    }
+    let frames: Vec<GazeRays> =
+        off.windows(2)
+            .enumerate()
+            .map(|(f, w)| {
+                let (a, b) = (w[0] as usize, w[1] as usize);
+                let frame_ids = idf.as_ref().map(|i| i[a..b].to_vec());
+                GazeRays::from_flat(&pf[3 * a..3 * b], &vf[3 * a..3 * b], &hf[a..b], frame_ids)
+                    .map_err(|e| match e {
+                        socialcore::Error::InvalidInput { arg, msg } => {
+                            socialcore::Error::invalid(arg, format!("frame {f}: {msg}"))
+                        }
+                        other => other,
+                    })
+            })
+            .collect::<socialcore::Result<_>>()
+            .map_err(|e| PyErr::from(crate::errors::PyCoreError(e)))?;
     let per_frame: Vec<Vec<Charge>> = detach(py, || {
         if frames.len() == 1 {
             Ok(vec![sal::find_charges(&frames[0], &opts, seed)?])

@@ -33,6 +33,7 @@ pub mod field;
 pub mod modes;
 mod partition;
 pub mod tracking;
+mod window;
 
 pub use field::{ray_density, ray_hessian, saliency, saliency_at, saliency_grid, Grid};
 pub use modes::{find_charges, find_charges_sequence, Charge, Ellipsoid, Membership, ModeOptions};

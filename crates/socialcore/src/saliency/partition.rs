@@ -20,8 +20,8 @@
 //! neighbouring frames, each a Gaussian of its own uncertainty plus a random-walk drift;
 //! the Laplace evidence then uses that density convolved with the members' posterior.
 //!
-//! The search starts from the modes of the mean-shift (Eq 6.7), the near-intersections
-//! of ray pairs and the pooled charges, and adds or removes one
+//! The search starts from the modes of the mean-shift (Eq 6.7) and the pooled charges,
+//! and adds or removes one
 //! candidate at a time while the score grows. For a candidate set, hard EM runs to a
 //! fixed point: every ray goes to the charge where it gains most (or to none), a charge
 //! left with fewer than `min_members` rays is dropped, and every charge is re-estimated as

@@ -1,0 +1,520 @@
+//! [`ModeOptions::joint_window`]: one likelihood over the whole sequence instead of one
+//! per frame, so that a frame the gaze model cannot resolve alone (two close targets seen
+//! from far, a pair of near-parallel rays) is resolved by its neighbours.
+//!
+//! The model: attention targets persist (a *source* moves at most by a random walk of
+//! `drift` metres per frame) and so do memberships (people keep looking at the same target
+//! for seconds). A person `i` attends, in frame `t`, one source or none; the sequence of
+//! these states costs [`ModeOptions::switch_cost`] nats per change of target (a change
+//! between two sources closer than `merge_radius` is free: they are the same target) and
+//! each attending ray gains what it gains in the frame model of
+//! [`Membership::Partition`](super::Membership::Partition) (`ln(2/h²) + ln((1 − u)/u) −
+//! ln K_t − ½‖d/h‖²`, `K_t` the charges of frame `t`). A source costs the Occam factor of
+//! its position once (`ln V − 3/2 ln 2π + ½ ln det A`, `A` the typical information of
+//! its members in a frame), not once per frame. A source's position in frame `t` is the
+//! local-linear fit (position and velocity, the velocity with a `N(0, drift²)` prior per
+//! axis) of the rays attending it within `pool_frames` frames of `t`, weighted by a
+//! Gaussian in the lag (standard deviation `pool_frames / 2`) and by `1/(s²h²)`.
+//!
+//! The search: sources start as the per-frame charges (the pooled pass) linked over time
+//! by position (gated by their uncertainty plus the drift) when they share members or are
+//! within a metre; then, a few times, the positions are refitted, every person's states
+//! are decoded jointly over the sequence (Viterbi: each person's chain is exact given the
+//! sources and `K_t`; `K_t` and the rule that a charge has `min_members` rays are
+//! iterated), and sources are dropped one at a time while the total likelihood grows.
+//! A frame's charges are the sources with at least `min_members` rays attending them.
+
+use super::modes::{q_of, ModeOptions};
+use super::partition::information;
+use super::GazeRays;
+use crate::error::Result;
+use nalgebra::{Matrix3, SMatrix, SVector, Vector3};
+use rayon::prelude::*;
+
+/// Rounds of (fit positions, decode, drop sources).
+const ROUNDS: usize = 4;
+/// Rounds of decoding while `K_t` and the `min_members` rule settle.
+const DECODE_ROUNDS: usize = 4;
+/// Linking gate: squared Mahalanobis distance between a charge and a source's last one.
+const LINK_GATE: f64 = 16.0;
+/// Charges within this many metres (plus the drift) may be linked without sharing members.
+const LINK_NEAR: f64 = 1.0;
+/// Smallest depth (metres) in a ray's weight.
+const MIN_DEPTH: f64 = 0.1;
+/// Depth (metres) of a ray's weight before a source has a position.
+const DEFAULT_DEPTH: f64 = 3.0;
+/// Most reweightings of a position fit (they stop when it moves less than [`FIT_TOL`]).
+const REWEIGHTINGS: usize = 10;
+const FIT_TOL: f64 = 1e-6;
+/// Condition number above which a source's rays do not fix its position.
+const MAX_CONDITION: f64 = 1e10;
+
+/// One frame's charge found by the window: its position and member rows.
+pub(super) type Found = (Vector3<f64>, Vec<usize>);
+
+type Mat6 = SMatrix<f64, 6, 6>;
+type Vec6 = SVector<f64, 6>;
+
+struct Model<'a> {
+    frames: &'a [GazeRays],
+    opts: &'a ModeOptions,
+    /// `row[t][p]`: the row of person `p` in frame `t`.
+    row: Vec<Vec<Option<usize>>>,
+    n_people: usize,
+    n_sources: usize,
+    ln_volume: f64,
+    prior: f64,
+}
+
+/// Each source's position (and its covariance) per frame, `None` where no ray attends it
+/// within the window.
+type Positions = Vec<Vec<Option<(Vector3<f64>, Matrix3<f64>)>>>;
+/// `z[t][row]`: the source a frame's ray attends.
+type Assign = Vec<Vec<Option<usize>>>;
+
+impl Model<'_> {
+    /// Links the per-frame charges `stage` (member rows) into sources (at most
+    /// `pool_frames` frames apart); returns the assignment they imply.
+    fn link(frames: &[GazeRays], stage: &[Vec<Found>], opts: &ModeOptions) -> (Assign, usize) {
+        let drift = opts.drift;
+        struct Last {
+            t: usize,
+            x: Vector3<f64>,
+            cov: Matrix3<f64>,
+            members: Vec<usize>,
+        }
+        let mut sources: Vec<Last> = Vec::new();
+        let mut z: Assign = frames.iter().map(|r| vec![None; r.len()]).collect();
+        for (t, found) in stage.iter().enumerate() {
+            let rays = &frames[t];
+            let obs: Vec<(Vector3<f64>, Matrix3<f64>, &Vec<usize>)> = found
+                .iter()
+                .filter_map(|(x, m)| {
+                    let cov = information(rays, x, m)?.try_inverse()?;
+                    Some((*x, cov, m))
+                })
+                .collect();
+            let mut pairs: Vec<(f64, usize, usize)> = Vec::new();
+            for (j, (x, cov, m)) in obs.iter().enumerate() {
+                for (k, s) in sources.iter().enumerate() {
+                    let lag = t - s.t;
+                    if lag == 0 || lag > opts.pool_frames {
+                        continue;
+                    }
+                    let walk = drift * lag as f64;
+                    let c = cov + s.cov + Matrix3::identity() * (walk * walk);
+                    let d = x - s.x;
+                    let Some(m2) = c.cholesky().map(|ch| d.dot(&ch.solve(&d))) else {
+                        continue;
+                    };
+                    let shared = m.iter().filter(|i| s.members.contains(i)).count();
+                    let union = m.len() + s.members.len() - shared;
+                    let near = d.norm() <= LINK_NEAR + walk;
+                    if m2 <= LINK_GATE && (2 * shared >= union || near) {
+                        pairs.push((m2, j, k));
+                    }
+                }
+            }
+            pairs.sort_by(|a, b| a.0.total_cmp(&b.0).then(a.1.cmp(&b.1)).then(a.2.cmp(&b.2)));
+            let mut used_obs = vec![false; obs.len()];
+            let mut used_src = vec![false; sources.len()];
+            let mut to = vec![None; obs.len()];
+            for (_, j, k) in pairs {
+                if !used_obs[j] && !used_src[k] {
+                    used_obs[j] = true;
+                    used_src[k] = true;
+                    to[j] = Some(k);
+                }
+            }
+            for (j, (x, cov, m)) in obs.into_iter().enumerate() {
+                let last = Last {
+                    t,
+                    x,
+                    cov,
+                    members: m.clone(),
+                };
+                let k = match to[j] {
+                    Some(k) => {
+                        sources[k] = last;
+                        k
+                    }
+                    None => {
+                        sources.push(last);
+                        sources.len() - 1
+                    }
+                };
+                m.iter().for_each(|&i| z[t][i] = Some(k));
+            }
+        }
+        (z, sources.len())
+    }
+
+    /// Source `k`'s local-linear position fit at every frame from the rays `z` gives it.
+    fn fit(
+        &self,
+        z: &Assign,
+        k: usize,
+        prev: &[Option<(Vector3<f64>, Matrix3<f64>)>],
+    ) -> Vec<Option<(Vector3<f64>, Matrix3<f64>)>> {
+        let f = self.frames.len();
+        let w = self.opts.pool_frames;
+        let tau = (w as f64 / 2.0).max(0.5);
+        let has: Vec<bool> = z.iter().map(|zt| zt.contains(&Some(k))).collect();
+        let ridge = 1.0 / (self.opts.drift * self.opts.drift).max(1e-12);
+        (0..f)
+            .map(|t| {
+                let (lo, hi) = (t.saturating_sub(w), (t + w).min(f - 1));
+                if !has[lo..=hi].iter().any(|&b| b) {
+                    return None;
+                }
+                // Weighted least squares, the depths `s` of the weights `1/(s²h²)` from a
+                // reference position, then from the estimate itself.
+                let solve = |reference: &dyn Fn(usize) -> Option<Vector3<f64>>| {
+                    let mut m = Mat6::zeros();
+                    let mut b = Vec6::zeros();
+                    for u in (lo..=hi).filter(|&u| has[u]) {
+                        let rays = &self.frames[u];
+                        let lag = u as f64 - t as f64;
+                        let g = (-0.5 * (lag / tau).powi(2)).exp();
+                        let x_ref = reference(u);
+                        for i in (0..rays.len()).filter(|&i| z[u][i] == Some(k)) {
+                            let v = &rays.v[i];
+                            let s = x_ref
+                                .map_or(DEFAULT_DEPTH, |x| (x - rays.p[i]).dot(v).max(MIN_DEPTH));
+                            let proj = (Matrix3::identity() - v * v.transpose())
+                                * (g * rays.inv_h2[i] / (s * s));
+                            let pp = proj * rays.p[i];
+                            for (r, c, scale) in
+                                [(0, 0, 1.0), (0, 3, lag), (3, 0, lag), (3, 3, lag * lag)]
+                            {
+                                let mut blk = m.fixed_view_mut::<3, 3>(r, c);
+                                blk += proj * scale;
+                            }
+                            let mut top = b.fixed_rows_mut::<3>(0);
+                            top += pp;
+                            let mut bottom = b.fixed_rows_mut::<3>(3);
+                            bottom += pp * lag;
+                        }
+                    }
+                    for a in 3..6 {
+                        m[(a, a)] += ridge;
+                    }
+                    let inv = m.try_inverse()?;
+                    let x: Vector3<f64> = (inv * b).fixed_rows::<3>(0).into_owned();
+                    let cov: Matrix3<f64> = inv.fixed_view::<3, 3>(0, 0).into_owned();
+                    let eig = cov.symmetric_eigenvalues();
+                    let (lo_e, hi_e) = (eig.min(), eig.max());
+                    (lo_e > 0.0 && hi_e <= MAX_CONDITION * lo_e && x.iter().all(|c| c.is_finite()))
+                        .then_some((x, cov))
+                };
+                let mut est = solve(&|u| prev[t].or(prev[u]).map(|(x, _)| x))?;
+                for _ in 0..REWEIGHTINGS {
+                    let x0 = est.0;
+                    let Some(next) = solve(&|_| Some(x0)) else {
+                        break;
+                    };
+                    let moved = (next.0 - x0).norm();
+                    est = next;
+                    if moved < FIT_TOL {
+                        break;
+                    }
+                }
+                Some(est)
+            })
+            .collect()
+    }
+
+    fn inside(&self, x: &Vector3<f64>) -> bool {
+        self.opts.bounds.as_ref().map_or(true, |(lo, hi)| {
+            (0..3).all(|a| x[a] >= lo[a] && x[a] <= hi[a])
+        })
+    }
+
+    /// Cost of person's change from state `a` to `b` (0 = none, `k + 1` = source `k`) into
+    /// frame `t`.
+    fn transition(&self, pos: &Positions, t: usize, a: usize, b: usize) -> f64 {
+        let c = self.opts.switch_cost;
+        if a == b {
+            return 0.0;
+        }
+        if a == 0 || b == 0 {
+            return c;
+        }
+        match (pos[a - 1][t], pos[b - 1][t]) {
+            (Some((xa, _)), Some((xb, _))) => {
+                let r = self.opts.merge_radius.max(1e-9);
+                c * (1.0 - (-0.5 * (xa - xb).norm_squared() / (r * r)).exp())
+            }
+            _ => c,
+        }
+    }
+
+    /// Viterbi decoding of person `p`'s states over the sequence, with `k_t` charges per
+    /// frame and `(t, source)` pairs in `forbid` excluded. Returns states and log score.
+    fn decode(
+        &self,
+        p: usize,
+        pos: &Positions,
+        alive: &[bool],
+        k_t: &[usize],
+        forbid: &[Vec<bool>],
+    ) -> (Vec<usize>, f64) {
+        let f = self.frames.len();
+        // Per frame: the live states and their emissions.
+        let mut states: Vec<Vec<(usize, f64)>> = Vec::with_capacity(f);
+        for t in 0..f {
+            let mut st = vec![(0usize, 0.0)];
+            if let Some(i) = self.row[t][p] {
+                let rays = &self.frames[t];
+                let gain = (2.0 * rays.inv_h2[i]).ln() + self.prior - (k_t[t].max(1) as f64).ln();
+                for k in 0..self.n_sources {
+                    if !alive[k] || forbid[t][k] {
+                        continue;
+                    }
+                    if let Some((x, _)) = pos[k][t] {
+                        let e = gain - 0.5 * q_of(rays, i, &x);
+                        if e.is_finite() && self.inside(&x) {
+                            st.push((k + 1, e));
+                        }
+                    }
+                }
+            } else {
+                // Absent: no evidence, every source that exists stays possible.
+                for k in 0..self.n_sources {
+                    if alive[k] && pos[k][t].is_some() {
+                        st.push((k + 1, 0.0));
+                    }
+                }
+            }
+            states.push(st);
+        }
+        let mut score: Vec<f64> = states[0].iter().map(|s| s.1).collect();
+        let mut back: Vec<Vec<usize>> = vec![Vec::new(); f];
+        for t in 1..f {
+            let mut next = Vec::with_capacity(states[t].len());
+            let mut bt = Vec::with_capacity(states[t].len());
+            for &(s, e) in &states[t] {
+                let (arg, best) = states[t - 1]
+                    .iter()
+                    .enumerate()
+                    .map(|(j, &(a, _))| (j, score[j] - self.transition(pos, t, a, s)))
+                    .fold(
+                        (0, f64::NEG_INFINITY),
+                        |acc, x| if x.1 > acc.1 { x } else { acc },
+                    );
+                next.push(best + e);
+                bt.push(arg);
+            }
+            score = next;
+            back[t] = bt;
+        }
+        let (mut j, best) =
+            score
+                .iter()
+                .enumerate()
+                .fold(
+                    (0, f64::NEG_INFINITY),
+                    |acc, (j, &s)| if s > acc.1 { (j, s) } else { acc },
+                );
+        let mut path = vec![0; f];
+        for t in (0..f).rev() {
+            path[t] = states[t][j].0;
+            if t > 0 {
+                j = back[t][j];
+            }
+        }
+        (path, best)
+    }
+
+    /// Every person decoded, with `K_t` and the `min_members` rule iterated from `z`'s
+    /// counts; returns the assignment and its log likelihood (without the Occam costs).
+    fn solve(&self, z: &Assign, pos: &Positions, alive: &[bool]) -> Result<(Assign, f64)> {
+        crate::interrupt::check()?;
+        let f = self.frames.len();
+        let min = self.opts.min_members;
+        let counts = |z: &Assign, t: usize| -> Vec<usize> {
+            let mut c = vec![0; self.n_sources];
+            z[t].iter().flatten().for_each(|&k| c[k] += 1);
+            c
+        };
+        let mut k_t: Vec<usize> = (0..f)
+            .map(|t| counts(z, t).iter().filter(|&&c| c >= min).count())
+            .collect();
+        let mut forbid = vec![vec![false; self.n_sources]; f];
+        let mut out: Assign = Vec::new();
+        let mut total = 0.0;
+        for _ in 0..DECODE_ROUNDS {
+            let paths: Vec<(Vec<usize>, f64)> = (0..self.n_people)
+                .into_par_iter()
+                .map(|p| self.decode(p, pos, alive, &k_t, &forbid))
+                .collect();
+            total = paths.iter().map(|x| x.1).sum();
+            out = self.frames.iter().map(|r| vec![None; r.len()]).collect();
+            for (p, (path, _)) in paths.iter().enumerate() {
+                for t in 0..f {
+                    if let (Some(i), s) = (self.row[t][p], path[t]) {
+                        out[t][i] = s.checked_sub(1);
+                    }
+                }
+            }
+            let mut settled = true;
+            for t in 0..f {
+                let c = counts(&out, t);
+                let k_new = c.iter().filter(|&&n| n >= min).count();
+                for k in 0..self.n_sources {
+                    if c[k] > 0 && c[k] < min {
+                        forbid[t][k] = true;
+                        settled = false;
+                    }
+                }
+                if k_new != k_t[t] {
+                    settled = false;
+                    k_t[t] = k_new;
+                }
+            }
+            if settled {
+                break;
+            }
+        }
+        // A source with too few rays in a frame is no charge there: its rays attend none.
+        for t in 0..f {
+            let c = counts(&out, t);
+            for s in out[t].iter_mut() {
+                if s.is_some_and(|k| c[k] < min) {
+                    *s = None;
+                }
+            }
+        }
+        Ok((out, total))
+    }
+
+    /// The Occam cost of source `k`: `ln V − 3/2 ln 2π + ½ ln det A`, `A` the median (in
+    /// `ln det`) information of its members in a frame; 0 if it explains no ray.
+    fn occam(&self, z: &Assign, pos: &Positions, k: usize) -> f64 {
+        let mut dets: Vec<f64> = (0..self.frames.len())
+            .filter_map(|t| {
+                let members: Vec<usize> = (0..z[t].len()).filter(|&i| z[t][i] == Some(k)).collect();
+                let (x, _) = pos[k][t]?;
+                if members.is_empty() {
+                    return None;
+                }
+                let det = information(&self.frames[t], &x, &members)?.determinant();
+                (det > 0.0).then(|| det.ln())
+            })
+            .collect();
+        if dets.is_empty() {
+            return 0.0;
+        }
+        dets.sort_by(f64::total_cmp);
+        let med = dets[dets.len() / 2];
+        self.ln_volume - 1.5 * std::f64::consts::TAU.ln() + 0.5 * med
+    }
+
+    fn objective(&self, z: &Assign, pos: &Positions, alive: &[bool], ll: f64) -> f64 {
+        ll - (0..self.n_sources)
+            .filter(|&k| alive[k])
+            .map(|k| self.occam(z, pos, k))
+            .sum::<f64>()
+    }
+}
+
+/// The joint window decision over a whole sequence, from the per-frame charges `stage`
+/// (positions and member rows) of the pooled pass: per frame, the charges (position and
+/// member rows).
+pub(super) fn joint_window(
+    frames: &[GazeRays],
+    stage: &[Vec<Found>],
+    opts: &ModeOptions,
+) -> Result<Vec<Vec<Found>>> {
+    let f = frames.len();
+    let mut people: Vec<i64> = frames
+        .iter()
+        .flat_map(|r| r.ids().iter().copied())
+        .collect();
+    people.sort_unstable();
+    people.dedup();
+    let row: Vec<Vec<Option<usize>>> = frames
+        .iter()
+        .map(|r| {
+            let mut out = vec![None; people.len()];
+            for (i, id) in r.ids().iter().enumerate() {
+                if let Ok(p) = people.binary_search(id) {
+                    out[p] = Some(i);
+                }
+            }
+            out
+        })
+        .collect();
+    let (mut z, n_sources) = Model::link(frames, stage, opts);
+    let volume = match &opts.bounds {
+        Some((lo, hi)) => (hi - lo).iter().map(|e| e.max(1e-3)).product::<f64>(),
+        None => opts.depth_max.powi(3),
+    };
+    let model = Model {
+        frames,
+        opts,
+        row,
+        n_people: people.len(),
+        n_sources,
+        ln_volume: volume.ln(),
+        prior: ((1.0 - opts.unattended) / opts.unattended).ln(),
+    };
+    let mut alive = vec![true; n_sources];
+    let mut pos: Positions = vec![vec![None; f]; n_sources];
+    for _ in 0..ROUNDS {
+        pos = (0..n_sources)
+            .into_par_iter()
+            .map(|k| {
+                if alive[k] {
+                    model.fit(&z, k, &pos[k])
+                } else {
+                    vec![None; f]
+                }
+            })
+            .collect();
+        let (mut best_z, ll) = model.solve(&z, &pos, &alive)?;
+        // Sources that explain no ray go first (they cost nothing and change nothing).
+        for (k, a) in alive.iter_mut().enumerate() {
+            *a = *a && best_z.iter().any(|zt| zt.contains(&Some(k)));
+        }
+        let mut best = model.objective(&best_z, &pos, &alive, ll);
+        // Then one drop at a time while the likelihood grows.
+        loop {
+            let mut pick: Option<(usize, f64, Assign)> = None;
+            let live: Vec<usize> = (0..n_sources).filter(|&k| alive[k]).collect();
+            for k in live {
+                alive[k] = false;
+                let (z2, ll2) = model.solve(&z, &pos, &alive)?;
+                let j = model.objective(&z2, &pos, &alive, ll2);
+                alive[k] = true;
+                if j > best + 1e-9 && pick.as_ref().map_or(true, |p| j > p.1) {
+                    pick = Some((k, j, z2));
+                }
+            }
+            match pick {
+                Some((k, j, z2)) => {
+                    alive[k] = false;
+                    best = j;
+                    best_z = z2;
+                }
+                None => break,
+            }
+        }
+        if best_z == z {
+            break;
+        }
+        z = best_z;
+    }
+    Ok((0..f)
+        .map(|t| {
+            (0..n_sources)
+                .filter_map(|k| {
+                    let members: Vec<usize> =
+                        (0..z[t].len()).filter(|&i| z[t][i] == Some(k)).collect();
+                    let (x, _) = pos[k][t]?;
+                    (alive[k] && members.len() >= opts.min_members).then_some((x, members))
+                })
+                .collect()
+        })
+        .collect())
+}
