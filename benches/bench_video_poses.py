@@ -4,7 +4,9 @@ For each seed: renders (or reuses) a scene of ``--wearers`` × ``--duration`` s 
 ``--size`` (the renderer's default scene), runs ``socialcam.poses`` at 10 fps, and prints
 the registered fraction, centre / rotation errors after one similarity fit (per frame:
 median, p95, max), synchronisation error, every stage's wall time, peak memory (RSS high
-water mark of this process and tracemalloc's Python peak), then the spread over seeds.
+water mark of this process; with ``--tracemalloc`` also Python's own peak, which slows the
+Python stages (every allocation is traced), so such a run's times are not the speed figure),
+then the spread over seeds.
 
 Reference: plain pycolmap incremental SfM over every output frame (10 fps) — SIFT on every
 frame (pycolmap defaults), sequential matching (overlap 10, no loop detection: the
@@ -136,6 +138,9 @@ def main() -> int:
     ap.add_argument("--manual-sync", action="store_true", help="true offsets instead of audio")
     ap.add_argument("--ref-seconds", type=float, default=3.0)
     ap.add_argument("--no-reference", action="store_true")
+    ap.add_argument(
+        "--tracemalloc", action="store_true", help="also Python's peak memory (slows the run)"
+    )
     ap.add_argument("--lens", choices=["pinhole", "radial", "fisheye"], default="pinhole")
     ap.add_argument("--camera-model", default=None, help="COLMAP model (default: SIMPLE_RADIAL)")
     args = ap.parse_args()
@@ -148,7 +153,8 @@ def main() -> int:
         if args.manual_sync:
             sync = {n: float(truth.start[v] - truth.start[0]) for v, n in enumerate(truth.names)}
         out = Path(tempfile.mkdtemp(prefix=f"bench_poses_{seed}_"))
-        tracemalloc.start()
+        if args.tracemalloc:
+            tracemalloc.start()
         t0 = time.perf_counter()
         c0 = time.process_time()  # CPU of every thread of this process: load-independent
         rec = sc.poses(
@@ -162,8 +168,10 @@ def main() -> int:
         )
         wall = time.perf_counter() - t0
         cpu = time.process_time() - c0
-        _, py_peak = tracemalloc.get_traced_memory()
-        tracemalloc.stop()
+        py_peak = float("nan")
+        if args.tracemalloc:
+            _, py_peak = tracemalloc.get_traced_memory()
+            tracemalloc.stop()
         e = pose_errors(rec, {n: truth.cameras(v) for v, n in enumerate(truth.names)})
         d = rec.to_dict()
         sync_err = np.abs(rec.offsets - (truth.start - truth.start[0]))
