@@ -6,6 +6,10 @@ from __future__ import annotations
 
 import csv
 import json
+import os
+import re
+import subprocess
+import sys
 import warnings
 
 import numpy as np
@@ -181,12 +185,34 @@ def test_load_run_config(tmp_path):
         load_run_config(tmp_path / "nope.toml")
 
 
-def test_view_writes_a_rerun_recording(first, tmp_path):
-    pytest.importorskip("rerun", reason="the optional 'rerun' extra is not installed")
+def _rrd_chunks(path):
+    """Entity path -> rows logged, read back with the rerun CLI shipped in rerun-sdk."""
+    env = dict(os.environ, RERUN_ANALYTICS="0")
+    cmd = [sys.executable, "-m", "rerun", "rrd"]
+    subprocess.run([*cmd, "verify", str(path)], check=True, capture_output=True, env=env)
+    out = subprocess.run(
+        [*cmd, "print", str(path)], check=True, capture_output=True, text=True, env=env
+    ).stdout
+    rows: dict[str, int] = {}
+    for n, entity in re.findall(r"with (\d+) rows .*? - (/\S+) - data columns", out):
+        rows[entity] = rows.get(entity, 0) + int(n)
+    return rows
+
+
+def test_view_writes_a_rerun_recording(first, scene, tmp_path):
     from socialcam.view import write_rrd
 
-    _res, out = first
+    res, out = first
     path = write_rrd(out, tmp_path / "r.rrd", frames=False)
-    assert path.stat().st_size > 10_000
+    rows = _rrd_chunks(path)
+    n_times = len(res.times)
+    # the static map, every wearer's camera over time, gaze and charges at every output time
+    assert rows.get("/world/map") == 1, rows
+    for n in scene.truth.names:
+        assert rows.get(f"/world/{n}", 0) > n_times // 2, (n, rows)
+    assert rows.get("/world/gaze") == n_times, rows
+    assert rows.get("/world/charges") == n_times, rows
+    tracks = [e for e in rows if e.startswith("/world/tracks/")]
+    assert len(tracks) == len(res.tracks) > 0, rows
     with pytest.raises(ValueError, match="no finished socialcam run"):
         write_rrd(tmp_path, tmp_path / "x.rrd")
