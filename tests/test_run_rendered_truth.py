@@ -82,19 +82,21 @@ def test_eq31_calibrates_every_rendered_wearer(results):
 def test_joint_attention_is_found_where_wearers_look_together(results):
     # found: a charge of >= 2 of the group within 0.5 m of the target, in the frames where
     # >= 2 wearers look at one target (settled for 0.6 s, head turned to within 3 h).
-    # Measured on seeds 1-12: 85-100 % (pooled 94 %; seeds 1-3: 92, 90, 96 %), median error
-    # 5-13 cm. Exclusive membership ("partition") finds 77 % on seed 3 and 47 % on seed 7;
-    # along the optical axis (no Eq 3.1) 35-49 %.
+    # Measured on seeds 1-12: 91-100 % (pooled 97.3 %; seeds 1-3: 96, 100, 99 %), median
+    # error 5-11 cm; unseen seeds 13-16: 92-100 %. A member within 2.5 bandwidths instead
+    # of 3 (member_sigma) finds 92, 90, 96 % on seeds 1-3 (85 % on seed 5); exclusive
+    # membership ("partition") 77 % on seed 3 and 47 % on seed 7; along the optical axis
+    # (no Eq 3.1) 35-49 %.
     for seed, (_truth, _cal, ja) in results.items():
         assert ja["groups"] >= 20, (seed, ja)
-        assert ja["found_fraction"] >= 0.88, (seed, ja)
+        assert ja["found_fraction"] >= 0.93, (seed, ja)
         assert ja["error_median_m"] < 0.12, (seed, ja)
         # false charges (no two members look at one thing): the wearers' rays inside their
         # own calibration segments are left out of the charges (with them in, wearers
         # calibrating side by side on nearby points make half of all charges), and so are
         # rays 0.5 m or less from the charge (min_charge_depth). Measured on seeds 1-3:
-        # 0.58, 0.51, 0.48; with calibration rays: 0.79, 0.82, 0.77; without the depth
-        # gate 0.61, 0.59, 0.55.
+        # 0.59, 0.52, 0.50; with calibration rays: 0.79, 0.82, 0.77; without the depth
+        # gate 0.61, 0.59, 0.55 (with member_sigma 2.5; 3 adds 0.01-0.02).
         assert ja["false_fraction"] < 0.7, (seed, ja)
 
 
