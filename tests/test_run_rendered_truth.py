@@ -104,11 +104,12 @@ def test_run_poses_at_its_output_rate(tmp_path, monkeypatch):
     # `socialcam run --fps` sets the rate the videos are posed at (poses() has its own
     # `fps` default, which run() once left at 10 Hz whatever its option said)
     import socialcam.pipeline as pipeline
+    from socialcam.sfm import VideoSfmOptions
 
     seen = {}
 
     def fake(videos, **kw):
-        seen["fps"] = kw["options"].fps
+        seen["options"] = kw["options"]
         raise ValueError("videos: stop here")
 
     monkeypatch.setattr(pipeline, "reconstruct_videos", fake)
@@ -116,4 +117,12 @@ def test_run_poses_at_its_output_rate(tmp_path, monkeypatch):
     video.write_bytes(b"")
     with pytest.raises(ValueError, match="stop here"):
         pipeline.run([video], tmp_path / "out", fps=30.0, progress=False)
-    assert seen["fps"] == 30.0
+    assert seen["options"].fps == 30.0
+    # and keyframes at the least rate of `socialcam poses` (issue 9's bench): run's own
+    # default of 2 keyframes/s gave 262 keyframes instead of 217 on seed 2 and a third more
+    # mapping time; a lower overlap than poses' (fewer keyframes in the calibration
+    # segments' range of motion: 191) is passed on
+    assert seen["options"].keyframe_fps == VideoSfmOptions().keyframe_fps
+    assert seen["options"].keyframe_overlap == 0.4 < VideoSfmOptions().keyframe_overlap
+    with pytest.raises(ValueError, match="keyframe_overlap"):
+        pipeline.RunOptions(keyframe_overlap=1.5)
