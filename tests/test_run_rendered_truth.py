@@ -95,9 +95,13 @@ def test_joint_attention_is_found_where_wearers_look_together(results):
         # own calibration segments are left out of the charges (with them in, wearers
         # calibrating side by side on nearby points make half of all charges), and so are
         # rays 0.5 m or less from the charge (min_charge_depth). Measured on seeds 1-3:
-        # 0.59, 0.52, 0.50; with calibration rays: 0.79, 0.82, 0.77; without the depth
+        # 0.59, 0.52, 0.50 (before the persistence rule below); with calibration rays: 0.79, 0.82, 0.77; without the depth
         # gate 0.61, 0.59, 0.55 (with member_sigma 2.5; 3 adds 0.01-0.02).
         assert ja["false_fraction"] < 0.7, (seed, ja)
+    # ... and charges seen in one frame only (crossings of turning heads; charge_persistence):
+    # 0.57, 0.38, 0.36 on seeds 1-3 (mean 0.44); keeping them: 0.59, 0.52, 0.50 (mean 0.54)
+    false = [ja["false_fraction"] for _t, _c, ja in results.values()]
+    assert np.mean(false) < 0.5, false
 
 
 def test_run_poses_at_its_output_rate(tmp_path, monkeypatch):

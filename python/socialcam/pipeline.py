@@ -265,6 +265,14 @@ class RunOptions:
         cameras of rendered scenes (seeds 1-12) 0.5 m takes the false charges from 67 % to
         64 % (per seed 0.48-0.79) and finds joint attention as often (94 %); 0.7 m took a
         few percent of it on one seed.
+    charge_persistence : seconds; a charge is kept only when a charge of at least
+        ``min_members`` of the same members lies within 0.5 m of it at another output time
+        at most this far away (0: every charge is kept). Two rays aimed at different things
+        cross somewhere as heads turn, for one frame; attention lasts. On the true cameras
+        of rendered scenes (seeds 1-16, 10 Hz) 0.1 s (the frames before and after) takes the
+        false charges from 66.6 % to 61.2 % (18 % fewer charges) and finds joint attention
+        as often (97.4 %, every seed ≥ 91 %); asking for two neighbours (any two
+        of the four frames within 0.2 s) gives 59 % and loses 0.8 % of joint attention.
     member_sigma : a ray is a member of a charge within this many bandwidths
         (:class:`socialcam.ChargeOptions`). 3, not 2.5: the gaze model of Sec 3.1 puts
         98.9 % of a wearer's true gaze within 3 ``h`` of the primary ray (2D Gaussian) and
@@ -302,6 +310,7 @@ class RunOptions:
     max_pose_gap: float = 2.0
     charges_in_calibration: bool = False
     min_charge_depth: float = 0.5
+    charge_persistence: float = 0.1
     member_sigma: float = 3.0
     min_members: int = 2
     membership: str = "all"
@@ -329,6 +338,7 @@ class RunOptions:
         check_float(self.min_depth_change, "min_depth_change", min=0.0)
         check_float(self.max_pose_gap, "max_pose_gap", min=1.0)
         check_float(self.min_charge_depth, "min_charge_depth", min=0.0)
+        check_float(self.charge_persistence, "charge_persistence", min=0.0)
         check_float(self.member_sigma, "member_sigma", min=0.0, min_exclusive=True)
         check_int(self.min_members, "min_members", min=1)
         check_choice(self.membership, "membership", MEMBERSHIP_RULES)
@@ -1016,7 +1026,9 @@ def run(
             "membership": opts.membership,
         }
         key = _hash(
-            key, charge_opts, _opt(opts, "seed", "charges_in_calibration", "min_charge_depth")
+            key,
+            charge_opts,
+            _opt(opts, "seed", "charges_in_calibration", "min_charge_depth", "charge_persistence"),
         )
         cache = _Cache(out, "charges", key)
         cached = cache.valid("charges.json")
@@ -1024,7 +1036,7 @@ def run(
             charges = [[_charge_from_dict(c) for c in cs] for cs in cache.read_json("charges.json")]
         else:
             cache.invalidate()
-            charges = _find_charges(frames, opts)
+            charges = _find_charges(frames, times, opts)
             cache.write_json("charges.json", [[c.to_dict() for c in cs] for cs in charges])
             cache.commit()
         n_charges = sum(len(cs) for cs in charges)
@@ -1222,7 +1234,7 @@ def gaze_and_charges(
         if f"{n}.p" in arrays
     }
     frames = _frames(names, _social(gaze, arrays["times"], segments, cals, opts))
-    return cals, arrays["times"], frames, _find_charges(frames, opts)
+    return cals, arrays["times"], frames, _find_charges(frames, arrays["times"], opts)
 
 
 def _social(
@@ -1249,7 +1261,9 @@ def _social(
     return out
 
 
-def _find_charges(frames: Sequence[GazeRays | None], opts: RunOptions) -> list[list[Charge]]:
+def _find_charges(
+    frames: Sequence[GazeRays | None], times: FloatArray, opts: RunOptions
+) -> list[list[Charge]]:
     present = [k for k, f in enumerate(frames) if f is not None]
     found = find_charges_sequence(
         [frames[k] for k in present],  # type: ignore[misc]
@@ -1270,7 +1284,38 @@ def _find_charges(frames: Sequence[GazeRays | None], opts: RunOptions) -> list[l
             if near.any():
                 c = replace(c, members=c.members[~near], member_index=c.member_index[~near])
             charges[k].append(replace(c, frame=k))
+    if opts.charge_persistence > 0:
+        charges = _persistent(charges, times, opts.charge_persistence, opts.min_members)
     return charges
+
+
+#: how far (metres) the same charge may lie in a neighbouring frame (``charge_persistence``)
+PERSIST_RADIUS = 0.5
+
+
+def _persistent(
+    charges: Sequence[Sequence[Charge]], times: FloatArray, window: float, min_members: int
+) -> list[list[Charge]]:
+    """The charges with a charge of at least ``min_members`` of the same members within
+    ``PERSIST_RADIUS`` at another output time at most ``window`` seconds away."""
+    t = np.asarray(times, dtype=np.float64)
+    out: list[list[Charge]] = []
+    for k, cs in enumerate(charges):
+        lo = int(np.searchsorted(t, t[k] - window - 1e-9))
+        hi = int(np.searchsorted(t, t[k] + window + 1e-9, side="right"))
+        near = [d for j in range(lo, hi) if j != k for d in charges[j]]
+        out.append(
+            [
+                c
+                for c in cs
+                if any(
+                    np.linalg.norm(d.position - c.position) <= PERSIST_RADIUS
+                    and len(np.intersect1d(d.members, c.members)) >= min_members
+                    for d in near
+                )
+            ]
+        )
+    return out
 
 
 def _fit_field(
