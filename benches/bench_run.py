@@ -33,8 +33,25 @@ from pathlib import Path
 import numpy as np
 
 from socialcam.pipeline import RunOptions, RunWarning, _calibrate_one, run
-from socialcam.synth.evaluate import _calibration_errors, run_vs_truth, truth_segments
+from socialcam.synth.evaluate import (
+    _alignment,
+    _calibration_errors,
+    run_vs_truth,
+    truth_segments,
+)
 from socialcam.synth.render import load_truth, render_scene
+
+
+def _centre_errors(rec, truth) -> np.ndarray:
+    """Distances (m) of every posed camera centre from the truth after the similarity
+    alignment of all of them."""
+    s, R, t = _alignment(rec, truth)
+    out = []
+    for n, cam in rec.cameras.items():
+        tc = truth.cameras(truth.names.index(n))
+        true_c = np.stack([np.interp(cam.times, tc.times, tc.C[:, d]) for d in range(3)], 1)
+        out.append(np.linalg.norm(s * cam.C @ R.T + t - true_c, axis=1))
+    return np.concatenate(out)
 
 
 def main() -> None:
@@ -45,7 +62,16 @@ def main() -> None:
     ap.add_argument("--wearers", type=int, default=4)
     ap.add_argument("--no-overlays", action="store_true")
     ap.add_argument("--fps", type=float, default=10.0, help="output rate (poses, gaze)")
+    ap.add_argument(
+        "--option", action="append", default=[], help="a RunOptions field, KEY=VALUE (repeatable)"
+    )
     args = ap.parse_args()
+    extra = {}
+    for item in args.option:
+        k, _, v = item.partition("=")
+        default = getattr(RunOptions(), k)
+        extra[k] = v == "True" if isinstance(default, bool) else type(default)(v)
+    tag = "".join(f"_{k}{v}" for k, v in extra.items())
     rows = []
     for seed in args.seeds:
         scene = Path(args.cache) / f"bench_{args.wearers}x{args.duration:g}_s{seed}"
@@ -61,11 +87,12 @@ def main() -> None:
             warnings.simplefilter("ignore", RunWarning)
             res = run(
                 videos,
-                scene / ("run" if args.fps == 10.0 else f"run_fps{args.fps:g}"),
+                scene / (("run" if args.fps == 10.0 else f"run_fps{args.fps:g}") + tag),
                 calibration=truth_segments(truth),
                 eye_height=eye_height,
                 overlays=not args.no_overlays,
                 fps=args.fps,
+                **extra,
             )
         wall, cpu = time.perf_counter() - t0, time.process_time() - c0
         acc = run_vs_truth(res, truth)
@@ -83,7 +110,12 @@ def main() -> None:
         print("stages:", ", ".join(f"{k} {v['seconds']:.1f}s" for k, v in rep["stages"].items()))
         print("CPU:", ", ".join(f"{k} {v['cpu_seconds']:.1f}s" for k, v in rep["stages"].items()))
         print("sfm:", ", ".join(f"{k} {v:.1f}s" for k, v in rep["sfm_timings"].items()))
-        print(f"posed {rep['poses']['n_posed']}/{rep['poses']['n_frames']}")
+        err = _centre_errors(res.reconstruction, truth)
+        acc["centre_error_m"] = {"median": float(np.median(err)), "max": float(err.max())}
+        print(
+            f"posed {rep['poses']['n_posed']}/{rep['poses']['n_frames']}, centre error median "
+            f"{1e3 * np.median(err):.2f} mm, max {1e3 * err.max():.1f} mm (similarity-aligned)"
+        )
         for which in ("calibration", "calibration_output_rate", "calibration_true_cameras"):
             for n, c in acc[which].items():
                 print(

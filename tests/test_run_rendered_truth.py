@@ -82,31 +82,38 @@ def test_eq31_calibrates_every_rendered_wearer(results):
 def test_joint_attention_is_found_where_wearers_look_together(results):
     # found: a charge of >= 2 of the group within 0.5 m of the target, in the frames where
     # >= 2 wearers look at one target (settled for 0.6 s, head turned to within 3 h).
-    # Measured on seeds 1-12: 85-100 % (pooled 94 %; seeds 1-3: 92, 90, 96 %), median error
-    # 5-13 cm. Exclusive membership ("partition") finds 77 % on seed 3 and 47 % on seed 7;
-    # along the optical axis (no Eq 3.1) 35-49 %.
+    # Measured on seeds 1-12: 91-100 % (pooled 97.3 %; seeds 1-3: 96, 100, 99 %), median
+    # error 5-11 cm; unseen seeds 13-16: 92-100 %. A member within 2.5 bandwidths instead
+    # of 3 (member_sigma) finds 92, 90, 96 % on seeds 1-3 (85 % on seed 5); exclusive
+    # membership ("partition") 77 % on seed 3 and 47 % on seed 7; along the optical axis
+    # (no Eq 3.1) 35-49 %.
     for seed, (_truth, _cal, ja) in results.items():
         assert ja["groups"] >= 20, (seed, ja)
-        assert ja["found_fraction"] >= 0.88, (seed, ja)
+        assert ja["found_fraction"] >= 0.93, (seed, ja)
         assert ja["error_median_m"] < 0.12, (seed, ja)
         # false charges (no two members look at one thing): the wearers' rays inside their
         # own calibration segments are left out of the charges (with them in, wearers
         # calibrating side by side on nearby points make half of all charges), and so are
         # rays 0.5 m or less from the charge (min_charge_depth). Measured on seeds 1-3:
-        # 0.58, 0.51, 0.48; with calibration rays: 0.79, 0.82, 0.77; without the depth
-        # gate 0.61, 0.59, 0.55.
+        # 0.59, 0.52, 0.50 (before the persistence rule below); with calibration rays: 0.79, 0.82, 0.77; without the depth
+        # gate 0.61, 0.59, 0.55 (with member_sigma 2.5; 3 adds 0.01-0.02).
         assert ja["false_fraction"] < 0.7, (seed, ja)
+    # ... and charges seen in one frame only (crossings of turning heads; charge_persistence):
+    # 0.57, 0.38, 0.36 on seeds 1-3 (mean 0.44); keeping them: 0.59, 0.52, 0.50 (mean 0.54)
+    false = [ja["false_fraction"] for _t, _c, ja in results.values()]
+    assert np.mean(false) < 0.5, false
 
 
 def test_run_poses_at_its_output_rate(tmp_path, monkeypatch):
     # `socialcam run --fps` sets the rate the videos are posed at (poses() has its own
     # `fps` default, which run() once left at 10 Hz whatever its option said)
     import socialcam.pipeline as pipeline
+    from socialcam.sfm import VideoSfmOptions
 
     seen = {}
 
     def fake(videos, **kw):
-        seen["fps"] = kw["options"].fps
+        seen["options"] = kw["options"]
         raise ValueError("videos: stop here")
 
     monkeypatch.setattr(pipeline, "reconstruct_videos", fake)
@@ -114,4 +121,12 @@ def test_run_poses_at_its_output_rate(tmp_path, monkeypatch):
     video.write_bytes(b"")
     with pytest.raises(ValueError, match="stop here"):
         pipeline.run([video], tmp_path / "out", fps=30.0, progress=False)
-    assert seen["fps"] == 30.0
+    assert seen["options"].fps == 30.0
+    # and keyframes at the least rate of `socialcam poses` (issue 9's bench): run's own
+    # default of 2 keyframes/s gave 262 keyframes instead of 217 on seed 2 and a third more
+    # mapping time; a lower overlap than poses' (fewer keyframes in the calibration
+    # segments' range of motion: 191) is passed on
+    assert seen["options"].keyframe_fps == VideoSfmOptions().keyframe_fps
+    assert seen["options"].keyframe_overlap == 0.4 < VideoSfmOptions().keyframe_overlap
+    with pytest.raises(ValueError, match="keyframe_overlap"):
+        pipeline.RunOptions(keyframe_overlap=1.5)

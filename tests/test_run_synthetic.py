@@ -165,21 +165,58 @@ def test_calibration_round_trips_through_json():
             np.testing.assert_array_equal(getattr(back, k), v)
 
 
+def _charges_of(frame, **options):
+    """``_find_charges`` on a frame that holds for 0.2 s (three 10-Hz frames): its charges
+    in the middle one."""
+    from socialcam.pipeline import _find_charges
+
+    return _find_charges([frame] * 3, np.array([0.0, 0.1, 0.2]), RunOptions(**options))[1]
+
+
 def test_charges_right_in_front_of_an_eye_are_left_out():
     # min_charge_depth: two rays cross somewhere whatever their wearers look at, often right
     # in front of one of them; a ray is no member of a charge nearer than 0.5 m to its eye
     from socialcam.charges import GazeRays
-    from socialcam.pipeline import _find_charges
 
     eyes = np.array([[0.0, 0.0, 1.6], [0.3, 2.2, 1.6], [2.0, 0.5, 1.6]])
     ahead = np.array([-0.3, 0.0, 0.0])
     x = eyes[2] + ahead  # 0.3 m in front of wearer 2, which looks through it
     frame = GazeRays(eyes, np.array([x, x, x + ahead]) - eyes, 0.02, normalize=True)
-    (charges,) = _find_charges([frame], RunOptions())
+    charges = _charges_of(frame)
     assert [sorted(c.members.tolist()) for c in charges] == [[0, 1]]
-    (charges,) = _find_charges([frame], RunOptions(min_charge_depth=0))
+    charges = _charges_of(frame, min_charge_depth=0)
     assert [sorted(c.members.tolist()) for c in charges] == [[0, 1, 2]]
     # a crossing of two rays 0.3 m in front of one of them: no charge left
     near = GazeRays(eyes[1:], np.array([x, x + ahead]) - eyes[1:], 0.02, normalize=True)
-    assert _find_charges([near], RunOptions())[0] == []
-    assert len(_find_charges([near], RunOptions(min_charge_depth=0))[0]) == 1
+    assert _charges_of(near) == []
+    assert len(_charges_of(near, min_charge_depth=0)) == 1
+
+
+def test_a_crossing_of_one_frame_is_no_charge():
+    # charge_persistence: rays aimed at different things cross for a frame as heads turn;
+    # a charge needs the same members (>= 2) within 0.5 m at a neighbouring output time
+    from socialcam.charges import GazeRays
+    from socialcam.pipeline import _find_charges
+
+    eyes = np.array([[0.0, 0.0, 1.6], [3.0, 0.0, 1.6], [0.0, 3.0, 1.6]])
+    target = np.array([1.5, 1.5, 1.2])
+    away = np.array([[-1.0, 0.0, 0.0], [1.0, 0.0, 0.0], [0.0, 1.0, 0.0]])  # three walls
+
+    def frame(look):
+        return GazeRays(eyes, look, 0.02, normalize=True)
+
+    steady = frame(target - eyes)  # all three look at the target
+    # wearers 0 and 1 turn their heads through a crossing 1 m behind it for one frame
+    cross = np.array([1.5, 2.5, 1.2])
+    turning = frame(np.array([cross - eyes[0], cross - eyes[1], away[2]]))
+    frames = [steady, steady, frame(away), turning, frame(away)]
+    times = np.arange(5) / 10.0
+    kept = _find_charges(frames, times, RunOptions())
+    assert [len(cs) for cs in kept] == [1, 1, 0, 0, 0]
+    assert sorted(kept[0][0].members.tolist()) == [0, 1, 2]
+    every = _find_charges(frames, times, RunOptions(charge_persistence=0))
+    assert [len(cs) for cs in every] == [1, 1, 0, 1, 0]
+    # at 30 Hz the same 0.1 s reaches three frames each way
+    assert _find_charges(frames, times / 3, RunOptions())[3] == []
+    with pytest.raises(ValueError, match="charge_persistence"):
+        RunOptions(charge_persistence=-1)

@@ -101,6 +101,19 @@ def test_streaming_at_10_fps_gives_the_nearest_frames(cfr):
         assert next(iter(v.frames(fps=10, start=1.0, end=1.2))).index == 30
         assert v.frame_at(0.52).index == 16 and decoded_index(v.frame_at(0.52).image) == 16
         assert v.frame_at(99.0).index == 44
+        # given local times (the overlays' common-clock grid minus an offset): the nearest
+        # frame to each, repeats kept, decoded once
+        at = [0.41, 0.45, 0.46, 0.47, 1.2]
+        assert [f.index for f in v.frames(at=at)] == [12, 13, 14, 14, 36]
+        assert [decoded_index(f.image) for f in v.frames(at=at)] == [12, 13, 14, 14, 6]
+        with pytest.raises(ValueError, match="at"):
+            list(v.frames(at=[0.5, 0.1]))
+        # what the overlay videos and the .rrd frames stream: (index into the times, image),
+        # times beyond the video skipped
+        from socialcam.pipeline import frames_at
+
+        got = [(j, decoded_index(img)) for j, img in frames_at(v, np.array([-1, 0.41, 0.47, 9]))]
+        assert got == [(1, 12), (2, 14)]
 
 
 def test_variable_frame_rate_uses_container_timestamps(tmp_path):

@@ -23,7 +23,7 @@ from typing import Any, Literal, get_args
 import numpy as np
 import numpy.typing as npt
 
-from socialcam._posetrack import KeyframeSelector
+from socialcam._posetrack import _LK_VIDEO_RATE, KeyframeSelector
 from socialcam._validate import (
     FloatArray,
     as_float_array,
@@ -1427,6 +1427,7 @@ def _pose_video(
     is_kf: npt.NDArray[np.bool_],
     reasons: dict[int, str],
     split: FloatArray,
+    lk: dict[str, Any] | None = None,
 ) -> str:
     """Poses the output frames of one video (``vid``, or its grey frames kept by a
     :class:`_FrameCache`; fills the arrays in place): registered
@@ -1434,7 +1435,8 @@ def _pose_video(
     tracked forward from the one before and backward from the one after, then PnP; with
     both, ``split (F, 2)`` receives the distance (map units) and angle (radians) between the
     poses from each side's tracks alone. Holds at
-    most one keyframe interval of grey frames. Returns a warning ('' if none)."""
+    most one keyframe interval of grey frames. ``lk``: the Lucas–Kanade settings (default
+    those of the output rate). Returns a warning ('' if none)."""
     from socialcam._posetrack import solve_pnp, track
 
     kf: tuple[Any, FloatArray, FloatArray, FloatArray, FloatArray] | None
@@ -1445,9 +1447,11 @@ def _pose_video(
         if not pending:
             return
         grays = [g for _, g in pending]
-        fwd = track(kf[0], kf[1], kf[2], grays, fb_px=1.0) if kf is not None else None
+        fwd = track(kf[0], kf[1], kf[2], grays, fb_px=1.0, lk=lk) if kf is not None else None
         bwd = (
-            track(nxt[0], nxt[1], nxt[2], grays[::-1], fb_px=1.0)[::-1] if nxt is not None else None
+            track(nxt[0], nxt[1], nxt[2], grays[::-1], fb_px=1.0, lk=lk)[::-1]
+            if nxt is not None
+            else None
         )
         for j, (k, _) in enumerate(pending):
             parts = [p[j] for p in (fwd, bwd) if p is not None]
@@ -1803,8 +1807,9 @@ def _pose_window(
 
     src = _Window(vid, float(wt[0]) - 1e-6, float(wt[-1]) + 1e-6)
     _pose_video(
-        src, name, F, model, reg_w, lens, opts, _NoBar(), Rs, ts, rms, n_inl, is_kf, reasons, split
-    )
+        src, name, F, model, reg_w, lens, opts, _NoBar(), Rs, ts, rms, n_inl, is_kf, reasons,
+        split, _LK_VIDEO_RATE,
+    )  # fmt: skip
     posed = np.isfinite(Rs[:, 0, 0])
     C = -np.einsum("fji,fj->fi", np.nan_to_num(Rs), np.nan_to_num(ts))
     if np.isfinite(rec.scale):

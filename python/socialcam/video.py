@@ -279,16 +279,24 @@ class Video:
         start: float = 0.0,
         end: float | None = None,
         gray: bool = False,
+        at: npt.ArrayLike | None = None,
     ) -> Iterator[Frame]:
         """Streams frames. With ``fps``, for each output time ``k / fps`` in ``[start,
         end)`` the frame nearest to it (a frame can repeat when ``fps`` exceeds the video's
-        rate); without, every frame with ``start ≤ time < end``. ``Frame.time`` is the
-        frame's own timestamp. Undecodable frames are skipped (nothing is yielded for
+        rate); with ``at`` (increasing local times, s), the frame nearest to each of them
+        (``start``, ``end`` and ``fps`` ignored); without either, every frame with ``start
+        ≤ time < end``. Only the frames yielded are converted to arrays. ``Frame.time`` is
+        the frame's own timestamp. Undecodable frames are skipped (nothing is yielded for
         them), counted in :attr:`n_corrupt` and reported by a :class:`CorruptFrameWarning`."""
         times = self.timestamps()
         t0 = check_float(start, "start")
         t1 = float(times[-1]) + 1e-9 if end is None else check_float(end, "end")
-        if fps is None:
+        if at is not None:
+            want_t = np.asarray(at, dtype=np.float64).reshape(-1)
+            if not np.isfinite(want_t).all() or (np.diff(want_t) < 0).any():
+                raise ValueError("at: expected increasing finite local times")
+            wanted = _nearest(times, want_t)
+        elif fps is None:
             wanted = np.nonzero((times >= t0) & (times < t1 if end is not None else True))[0]
         else:
             rate = check_float(fps, "fps", min=0.0, min_exclusive=True)

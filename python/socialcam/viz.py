@@ -185,12 +185,20 @@ def plot_charges_over_time(
         for tr in tracks
         for f, p in zip(tr.frames, tr.positions, strict=True)
     }
+    ct, cm, ctid, mt, mm, mtid = [], [], [], [], [], []  # one scatter each: fast
     for f, cs in enumerate(charges):
         for c in cs:
             tid = track_of.get((f, hash(c.position.tobytes())), -1)
-            ax1.scatter(t[f], c.magnitude, s=6, color=_track_colour(tid))
+            ct.append(t[f])
+            cm.append(c.magnitude)
+            ctid.append(tid)
             for m in c.members:
-                ax2.scatter(t[f], int(m), s=8, marker="s", color=_track_colour(tid))
+                mt.append(t[f])
+                mm.append(int(m))
+                mtid.append(tid)
+    if ct:
+        ax1.scatter(ct, cm, s=6, c=[_track_colour(i) for i in ctid])
+        ax2.scatter(mt, mm, s=8, marker="s", c=[_track_colour(i) for i in mtid])
     ax1.set_ylabel("magnitude")
     ax1.set_title("social charges over time (colour = track; grey = no track)")
     for i, n in enumerate(names):

@@ -1319,10 +1319,11 @@ def _write_video(
     height: int,
     audio: npt.NDArray[np.float32] | None,
     crf: int,
+    preset: str = "veryfast",
 ) -> None:
     tmp = path.with_name(path.stem + ".tmp" + path.suffix)
     try:
-        _encode(tmp, frames, fps, width, height, audio, crf)
+        _encode(tmp, frames, fps, width, height, audio, crf, preset)
     except BaseException:  # Ctrl-C or an error: no half-written file is left behind
         tmp.unlink(missing_ok=True)
         raise
@@ -1337,6 +1338,7 @@ def _encode(
     height: int,
     audio: npt.NDArray[np.float32] | None,
     crf: int,
+    preset: str = "veryfast",
 ) -> None:
     import av
 
@@ -1347,7 +1349,7 @@ def _encode(
         vs.pix_fmt = "yuv420p"
         # mbtree off: with it, identical runs gave different files now and then on this
         # machine (x264's float SIMD; also gone with asm=0, which is 15× slower)
-        vs.options = {"crf": str(crf), "preset": "veryfast", "x264-params": "mbtree=0"}
+        vs.options = {"crf": str(crf), "preset": preset, "x264-params": "mbtree=0"}
         vs.codec_context.gop_size = 30
         vs.codec_context.time_base = 1 / rate
         aus = None
