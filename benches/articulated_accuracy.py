@@ -228,6 +228,7 @@ def main() -> None:
                 ]
                 print(
                     f"  {part:8s} {method:14s} {allv.mean():.3f} / {np.median(allv):.3f} "
+                    f"(ratio {allv.mean() / np.median(allv):.2f}) "
                     f"(p90 {np.quantile(allv, 0.9):.3f}; seeds {' '.join(f'{m:.3f}' for m in seed_means)})"
                     f"   " + "; ".join(txt)
                 )
