@@ -332,9 +332,10 @@ def test_robust_refines_the_length_per_joint(scene: Scene) -> None:
 
 
 def test_robust_under_thesis_conditions(scene: Scene) -> None:
-    # Fig 4.3(c) conditions, pooled over the draws. Measured, robust: median 0.069–0.088,
-    # mean 0.215–0.319 (per draw 0.07–0.40: one or two joints follow the impostor), 0.30–0.51
-    # × the thesis method's (mean 0.62–0.75).
+    # Fig 4.3(c) conditions, pooled over the draws. Measured, robust: median 0.067–0.083,
+    # mean 0.211–0.268 over seeds 0–3, 4–7, 8–11 (per draw 0.13–0.37: one or two of the
+    # five joints follow the impostor; session 5's rule without the motion term: 0.202,
+    # 0.273, 0.409), 0.32–0.38 × the thesis method's (mean 0.62–0.75).
     good = _good(scene)
     robust = _errs(scene, good, "robust", **FIG_43C)
     thesis = _errs(scene, good, "thesis", **FIG_43C)

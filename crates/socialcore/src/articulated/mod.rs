@@ -46,7 +46,8 @@ pub const LENGTH_PRIOR: f64 = 0.3;
 /// `benches/articulated_accuracy.py` (6 noise draws) weights 1–3 perform alike (Fig 4.3(c)
 /// mean 0.147–0.153 dev, 0.160–0.162 held-out, 0.223–0.231 new), while on the 131_01
 /// scene of the tests weights above 1 lose to the lowest cost (mean 0.24 at 1, 0.34 at 2):
-/// the lowest weight that helps was kept.
+/// the lowest weight that helps was kept (session 5, before the motion term; with it, 0.5
+/// and 1 perform alike on the same windows).
 pub const SMOOTH_WEIGHT: f64 = 1.0;
 
 /// Default of [`ArticulatedOptions::motion_weight`]: a start whose bone direction sweeps
