@@ -11,14 +11,17 @@ Tables: Fig 4.2(c) (error against η_a), Fig 4.3(c) conditions (1 px noise, 5 % 
 error, bone length × 1.05, 5 % missing; target mean ≤ 0.13 over joints with η_a > 1.25)
 per clip and per seed, the exact length-and-root case (target mean ≤ 2 × median), and
 Fig 4.3(a)/(b) sweeps (--full). Methods: the thesis, the robust method keeping the
-lowest reprojection error ("robust-mincost", ``smooth_weight=0``) and the robust method
-(default: the start with the best trade of reprojection cost, in standard deviations,
-against log roughness). Development windows: 131_01 and 85_02 at offsets 0, 60, 120
-(smooth_weight was chosen on them, with held-out and new as checks among 0.5–4);
-held out: all of 131_02, and every clip at offsets 30 and 90; new: CMU 131_01 frames
-150–449 (starting to walk) and 131_02 frames 850–1149 (walking to a stop), every offset
-(unseen until the selection score replaced the tolerance rule).
-Run: python benches/articulated_accuracy.py [--quick | --full]
+lowest reprojection error ("robust-mincost", ``smooth_weight=motion_weight=0``; --full),
+the robust method scoring cost against the roughness of Eq 4.12 only ("robust-smooth",
+``motion_weight=0``, session 5's rule) and the robust method (default: cost in standard
+deviations + log roughness + 2 × log angular variance, least motion).
+Window sets: development, 131_01 and 85_02 at offsets 0, 60, 120; held out, all of
+131_02 and every clip at offsets 30 and 90; new, CMU 131_01 frames 150–449 (starting to
+walk) and 131_02 frames 850–1149 (walking to a stop), every offset. motion_weight was
+chosen on those three sets (all seen before). Fresh (session 6, held out until the method
+was fixed): CMU 131_01 frames 750–993 (to a stop), 131_02 frames 200–499 (starting to
+walk), every offset, and 85_02 frames 300–779 (offsets 300, 390, 480, 570, 660).
+Run: python benches/articulated_accuracy.py [--quick | --full] [--parts dev,fresh,...]
 """
 
 from __future__ import annotations
@@ -119,34 +122,44 @@ def run(
     x = w.px[:, j] + rng.normal(0, noise, (F, 2))
     x[rng.random(F) < missing] = np.nan
     parent = w.P[:, p] + smooth_offset(F, root * r, rng)
-    kw = (
-        {"method": "robust", "smooth_weight": 0.0}
-        if method == "robust-mincost"
-        else {"method": method}
-    )
+    kw = METHOD_OPTIONS[method]
     out = sc.reconstruct_articulated(x, w.cams, parent, r * scale, k=K_DCT, **kw)
     den = w.P[:, j] if world else w.P[:, j] - w.P[:, p]
     return float(np.linalg.norm(out.points - w.P[:, j]) / np.linalg.norm(den))
 
 
-METHODS = ("thesis", "robust-mincost", "robust")
-PARTS = ("dev", "held-out", "new")
+METHOD_OPTIONS: dict[str, dict] = {
+    "thesis": {"method": "thesis"},
+    "robust-mincost": {"method": "robust", "smooth_weight": 0.0, "motion_weight": 0.0},
+    "robust-smooth": {"method": "robust", "motion_weight": 0.0},
+    "robust": {"method": "robust"},
+}
+PARTS = ("dev", "held-out", "new", "fresh")
+FRESH_C3D_OFFSETS = (300, 390, 480, 570, 660)
 
 
 def main() -> None:
     ap = argparse.ArgumentParser()
     ap.add_argument("--quick", action="store_true", help="one seed")
     ap.add_argument("--full", action="store_true", help="also the Fig 4.2(c) and 4.3 sweeps")
+    ap.add_argument("--parts", default=",".join(PARTS), help="window sets to run")
     args = ap.parse_args()
     seeds = [0] if args.quick else [0, 1, 2]
+    parts = [p for p in args.parts.split(",") if p]
+    if not set(parts) <= set(PARTS):
+        raise SystemExit(f"--parts: choose among {', '.join(PARTS)}")
+    methods = [m for m in METHOD_OPTIONS if args.full or m != "robust-mincost"]
     clips = {
         "131_01": bvh_clip("cmu_131_01_walk300.bvh"),
         "131_02": bvh_clip("cmu_131_02_walk300.bvh"),
         "85_02": c3d_clip("cmu_85_02.c3d"),
         "131_01s": bvh_clip("cmu_131_01_start300.bvh"),
         "131_02e": bvh_clip("cmu_131_02_stop300.bvh"),
+        "131_01t": bvh_clip("cmu_131_01_stop244.bvh"),
+        "131_02s": bvh_clip("cmu_131_02_start300.bvh"),
     }
     new_clips = ("131_01s", "131_02e")
+    fresh_clips = ("131_01t", "131_02s")
     dev_clips = ("131_01", "85_02")
     wins: list[tuple[str, Window]] = []
     for name, (P, pairs) in clips.items():
@@ -156,14 +169,19 @@ def main() -> None:
             part = (
                 "new"
                 if name in new_clips
+                else "fresh"
+                if name in fresh_clips
                 else "dev"
                 if name in dev_clips and off % 60 == 0
                 else "held-out"
             )
             wins.append((part, window(name, P, pairs, 2, off)))
+    P85, pairs85 = clips["85_02"]
+    wins += [("fresh", window("85_02", P85, pairs85, 2, off)) for off in FRESH_C3D_OFFSETS]
+    wins = [(part, w) for part, w in wins if part in parts]
     good = [(part, w, j, p) for part, w in wins for j, p in w.pairs if w.eta[j] > 1.25]
-    for part in PARTS:
-        sel = [(w.clip, off) for pt, w in wins for off in [0] if pt == part]
+    for part in parts:
+        sel = [w.clip for pt, w in wins if pt == part]
         print(
             f"{part}: {len(sel)} windows, {sum(1 for g in good if g[0] == part)} joints with η_a > 1.25"
         )
@@ -186,9 +204,9 @@ def main() -> None:
     def report(title: str, **kw) -> None:
         print(f"\n{title}")
         print("  mean / median of the relative error; per clip: mean [min–max over seeds]")
-        for part in PARTS:
+        for part in parts:
             jobs = [g for g in good if g[0] == part]
-            for method in METHODS:
+            for method in methods:
                 res: dict[tuple[str, int], list[float]] = {}
                 for s in seeds:
                     for _, w, j, p in jobs:
@@ -210,6 +228,7 @@ def main() -> None:
                 ]
                 print(
                     f"  {part:8s} {method:14s} {allv.mean():.3f} / {np.median(allv):.3f} "
+                    f"(ratio {allv.mean() / np.median(allv):.2f}) "
                     f"(p90 {np.quantile(allv, 0.9):.3f}; seeds {' '.join(f'{m:.3f}' for m in seed_means)})"
                     f"   " + "; ".join(txt)
                 )

@@ -257,7 +257,8 @@ class ArticulatedOptions:
         sphere shrunk to the ``tangent_quantile`` of the parent-to-ray distances (the
         near-grazing rays then touch it once, both roots' evidence merged), refines each
         start with the bone length free within ``length_tol``, and keeps the start that
-        best trades reprojection error against smoothness (``smooth_weight``).
+        best trades reprojection error against smoothness (``smooth_weight``) and least
+        motion (``motion_weight``).
     fit_radius : set the thesis sphere to the largest parent-to-ray distance instead of
         only enlarging the given length when a ray misses.
     tangent_quantile : robust method: quantile in [0, 1] of the parent-to-ray distances
@@ -279,7 +280,14 @@ class ArticulatedOptions:
         of its roughness (the objective of Eq 4.12 on its refined unit directions); the
         lowest score wins. So a start ten times smoother may fit the pixels worse by up to
         ``smooth_weight`` standard deviations — on real motion the impostor often fits them
-        slightly better. 0 keeps the lowest cost.
+        slightly better. 0 (with ``motion_weight`` 0) keeps the lowest cost.
+    motion_weight : robust method: least-motion evidence in the same score, ``motion_weight
+        × log₁₀`` of the angular variance ``Σ_t ‖u_t − ū‖²`` of the start's unit bone
+        direction over the window (every frame); ≥ 0. The wrong starts that fit the pixels
+        and Eq 4.12 as well as the truth are mostly slow swings of the bone away from it,
+        towards the impostor side: a start that moves ten times less may fit the pixels
+        worse by up to ``motion_weight`` standard deviations. 0 leaves the selection to
+        ``smooth_weight``.
     max_iter : Levenberg–Marquardt iterations of the refinement (≥ 1).
     time_limit : seconds per binary program (the best incumbent is used after it), or
         ``None``.
@@ -296,6 +304,7 @@ class ArticulatedOptions:
     grazing_separation: float = 1.0
     flip_rounds: int = 3
     smooth_weight: float = 1.0
+    motion_weight: float = 2.0
     max_iter: int = 100
     time_limit: float | None = None
     node_limit: int | None = DEFAULT_NODE_LIMIT
@@ -311,6 +320,7 @@ class ArticulatedOptions:
         check_float(self.grazing_separation, "grazing_separation", min=0.0, max=2.0)
         check_int(self.flip_rounds, "flip_rounds", min=0, max=100)
         check_float(self.smooth_weight, "smooth_weight", min=0.0, max=1e6)
+        check_float(self.motion_weight, "motion_weight", min=0.0, max=1e6)
         check_int(self.max_iter, "max_iter", min=1, max=100_000)
         if self.time_limit is not None:
             check_float(self.time_limit, "time_limit", min=0.0, max=1e9)

@@ -194,6 +194,8 @@ struct PyArticulatedOptions {
     #[pyo3(attribute)]
     smooth_weight: f64,
     #[pyo3(attribute)]
+    motion_weight: f64,
+    #[pyo3(attribute)]
     max_iter: usize,
     #[pyo3(attribute)]
     time_limit: Option<f64>,
@@ -222,6 +224,7 @@ fn art_options(o: &PyArticulatedOptions) -> PyResult<ArticulatedOptions> {
         grazing_separation: o.grazing_separation,
         flip_rounds: o.flip_rounds,
         smooth_weight: o.smooth_weight,
+        motion_weight: o.motion_weight,
         lm: socialcore::geometry::LmOptions {
             max_iterations: o.max_iter,
             ..defaults.lm

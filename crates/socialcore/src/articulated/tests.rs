@@ -338,6 +338,56 @@ fn start_selection_trades_cost_against_smoothness() {
         (&[], Some(2.0), None, "no start"),
     ];
     for (starts, weight, want, what) in cases {
-        assert_eq!(select_start(starts, 50, 8, weight), want, "{what}");
+        // Equal motion: only the cost and the roughness decide.
+        let ev: Vec<StartEvidence> = starts
+            .iter()
+            .map(|&(cost, roughness)| StartEvidence {
+                cost,
+                roughness,
+                motion: 1.0,
+            })
+            .collect();
+        for motion in [0.0, 2.0] {
+            let w = weight.map(|w| (w, motion));
+            assert_eq!(select_start(&ev, 50, 8, w), want, "{what}");
+        }
     }
+}
+
+#[test]
+fn start_selection_prefers_the_stiller_of_equal_starts() {
+    // σ(cost) ≈ 12.9 px² as above. Default weights (1, 2): a start sweeping ten times less
+    // angular variance may cost up to two standard deviations (25.8 px²) more.
+    let ev = |cost: f64, roughness: f64, motion: f64| StartEvidence {
+        cost,
+        roughness,
+        motion,
+    };
+    let w = Some((SMOOTH_WEIGHT, MOTION_WEIGHT));
+    let base = ev(83.0, 1e-3, 4.0);
+    // Same cost and roughness, the second moves 10× less: the stiller wins.
+    assert_eq!(
+        select_start(&[base, ev(83.0, 1e-3, 0.4)], 50, 8, w),
+        Some(1)
+    );
+    // 20 px² worse and 10× stiller: still kept; 30 px² worse: rejected.
+    assert_eq!(
+        select_start(&[base, ev(103.0, 1e-3, 0.4)], 50, 8, w),
+        Some(1)
+    );
+    assert_eq!(
+        select_start(&[base, ev(113.0, 1e-3, 0.4)], 50, 8, w),
+        Some(0)
+    );
+    // 10× stiller but 1000× rougher: the smoothness of Eq 4.12 outweighs (1·3 > 2·1).
+    assert_eq!(select_start(&[base, ev(83.0, 1.0, 0.4)], 50, 8, w), Some(0));
+    // The motion term off: equal scores, the first (lowest) kept; NaN motion never wins.
+    assert_eq!(
+        select_start(&[base, ev(83.0, 1e-3, 0.4)], 50, 8, Some((1.0, 0.0))),
+        Some(0)
+    );
+    assert_eq!(
+        select_start(&[base, ev(80.0, 1e-3, f64::NAN)], 50, 8, w),
+        Some(0)
+    );
 }
