@@ -55,13 +55,16 @@ def _truth_rays(truth, bias_deg: float = 0.0):
 def test_joint_attention_scorer_against_truth_rays(scene):
     """The scorer itself: exo rays that are the true head directions (= the ego primary
     gaze of the wearers) of everyone seen score like the ego rays on the same groups
-    (measured 0.062 vs 0.058 m; seed 2 0.054 vs 0.047); the same rays turned 3° / 5°
+    (measured 0.062 vs 0.058 m; circle seed 2 0.054 vs 0.047); the same rays turned 3° / 5°
     score 2× / 3.4× worse (0.117 / 0.201 m): how little face-direction error joint
     attention tolerates."""
     truth, _f3, _r = scene
     owner = {j: j for j in range(truth.face_normal[0].shape[1])}
     exact = face_joint_attention(truth, _truth_rays(truth), owner)
-    assert exact["exo"]["groups"] >= 25 and exact["exo"]["found_fraction"] >= 0.85, exact
+    # groups count once their members have looked at the head for 0.6 s: 34 groups, the
+    # ego rays find all (without the settling time: 51 groups, 96 % found)
+    assert 25 <= exact["exo"]["groups"] <= 45 and exact["exo"]["found_fraction"] >= 0.85, exact
+    assert exact["ego"]["found_fraction"] >= 0.98, exact
     assert exact["exo"]["error_median_m"] < 1.25 * exact["ego_same_groups"]["error_median_m"]
     turned = face_joint_attention(truth, _truth_rays(truth, 3.0), owner)
     assert turned["exo"]["error_median_m"] > 1.6 * exact["exo"]["error_median_m"], turned
