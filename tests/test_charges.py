@@ -535,9 +535,8 @@ def test_joint_window_resolves_frames_the_frame_alone_cannot(seed):
     error/oracle 0.29 / 0.45; without it 0.91 / 0.81 and 0.86 / 1.13."""
     scene = synth.marker_check_family(seed, n_frames=100)
     frames, room = scene.ray_frames(), tuple(scene.room)
-    right, err, oerr = scene.charge_scores(
-        sc.find_charges_sequence(frames, bounds=room, joint_window=True)
-    )
+    # The window is the default.
+    right, err, oerr = scene.charge_scores(sc.find_charges_sequence(frames, bounds=room))
     print(f"held-out {seed}: joint right {right:.2f}, error/oracle {err / oerr:.2f}")
     assert right >= 0.95 and err <= 1.25 * oerr
     # Unbiased and better than the oracle intersection of single frames: the window's

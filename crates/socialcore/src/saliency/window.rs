@@ -577,3 +577,38 @@ pub(super) fn joint_window(
         })
         .collect())
 }
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+
+    fn fit(x: f64, sd: f64) -> Fit {
+        Some((Vector3::new(x, 0.0, 0.0), Matrix3::identity() * (sd * sd)))
+    }
+
+    #[test]
+    fn bandwidth_ladder_halves_to_half_a_frame() {
+        assert_eq!(bandwidths(10), vec![5.0, 2.5, 1.25, 0.625, 0.5]);
+        assert_eq!(bandwidths(1), vec![0.5]);
+    }
+
+    #[test]
+    fn narrower_fits_reject_a_wide_fit_outside_their_ellipsoids() {
+        // Wide fit within 4 σ of every narrower one: kept.
+        assert_eq!(
+            select_bandwidth(&[fit(0.0, 0.01), fit(0.03, 0.01), fit(-0.03, 0.02)]),
+            Some(0)
+        );
+        // Wide fit 10 σ from the narrowest: the first fit that all narrower ones accept.
+        assert_eq!(
+            select_bandwidth(&[fit(0.0, 0.01), fit(0.9, 0.05), fit(1.0, 0.1)]),
+            Some(1)
+        );
+        // Missing fits do not vote; no fit at all gives none.
+        assert_eq!(
+            select_bandwidth(&[fit(0.0, 0.01), None, fit(0.02, 0.1)]),
+            Some(0)
+        );
+        assert_eq!(select_bandwidth(&[None, None]), None);
+    }
+}
