@@ -324,7 +324,10 @@ class ChargeOptions:
         sources with ``min_members`` rays attending. People are followed by their
         ``ids``. The window resolves frames that the frame alone cannot (two close
         targets seen from far, pairs of near-parallel rays); it cannot split a target
-        that no frame found apart. ``False``: the pooled frame rule alone
+        that no frame found apart. It needs people that can be followed over frames: give
+        every frame's rays their person ``ids`` (rows are taken as people otherwise);
+        when neither ids nor rows identify a person over frames, use ``False`` (the pooled
+        frame rule alone)
     switch_cost : ``joint_window`` only: the cost (nats) of a person changing target,
         ``ln(1/q)`` for a prior change probability ``q`` per frame (default ``ln 30``:
         people keep a target for about 3 s at 10 fps)
