@@ -6,7 +6,7 @@ groups, and the scene's parameters (people, markers, h, closest marker pair).
 
     python benches/charges_heldout.py --seeds 100-119            # the held-out figures
     python benches/charges_heldout.py --seeds 0-29 --sequence     # development seeds
-    python benches/charges_heldout.py --seeds 100-119 --set joint_window=True   # the window
+    python benches/charges_heldout.py --seeds 100-119 --set joint_window=False  # pooled rule only
 """
 
 from __future__ import annotations

@@ -326,7 +326,7 @@ def test_mocap_replica_accuracy(seed):
     # members' Σ‖d/h‖² (Eq 6.2) to 1 % at 5 mm.
     frames = scene.ray_frames()[:40]
     for f, c, _, _ in _replica_matches(
-        scene, sc.find_charges_sequence(frames, bounds=tuple(scene.room))
+        scene, sc.find_charges_sequence(frames, bounds=tuple(scene.room), joint_window=False)
     ):
         assert c is not None
         r = scene.rays(f)
@@ -467,7 +467,9 @@ def test_pooling_over_frames_is_the_stage_that_reaches_the_target(seed):
     (``pool_frames=0``) 0.81 / 0.87 and 1.86 / 1.37."""
     scene = synth.marker_check_family(seed, n_frames=100)
     frames, room = scene.ray_frames(), tuple(scene.room)
-    right, err, oerr = scene.charge_scores(sc.find_charges_sequence(frames, bounds=room))
+    right, err, oerr = scene.charge_scores(
+        sc.find_charges_sequence(frames, bounds=room, joint_window=False)
+    )
     assert right >= 0.95 and err <= 1.25 * oerr
     right, err, oerr = scene.charge_scores(
         sc.find_charges_sequence(frames, bounds=room, pool_frames=0)
@@ -533,15 +535,16 @@ def test_joint_window_resolves_frames_the_frame_alone_cannot(seed):
     error/oracle 0.29 / 0.45; without it 0.91 / 0.81 and 0.86 / 1.13."""
     scene = synth.marker_check_family(seed, n_frames=100)
     frames, room = scene.ray_frames(), tuple(scene.room)
-    right, err, oerr = scene.charge_scores(
-        sc.find_charges_sequence(frames, bounds=room, joint_window=True)
-    )
+    # The window is the default.
+    right, err, oerr = scene.charge_scores(sc.find_charges_sequence(frames, bounds=room))
     print(f"held-out {seed}: joint right {right:.2f}, error/oracle {err / oerr:.2f}")
     assert right >= 0.95 and err <= 1.25 * oerr
     # Unbiased and better than the oracle intersection of single frames: the window's
     # positions pool the rays of neighbouring frames.
     assert err <= 0.6 * oerr
-    right, err, oerr = scene.charge_scores(sc.find_charges_sequence(frames, bounds=room))
+    right, err, oerr = scene.charge_scores(
+        sc.find_charges_sequence(frames, bounds=room, joint_window=False)
+    )
     print(f"held-out {seed}: frame by frame right {right:.2f}, error/oracle {err / oerr:.2f}")
     assert right < 0.93
 
@@ -571,6 +574,10 @@ def test_joint_window_follows_people_by_id():
 
 @pytest.mark.parametrize("name", ["meeting", "party"])
 def test_scene_charge_counts_and_tracks(name):
+    """The thesis' meeting and party scenes with the defaults (the joint window on).
+    Measured right count 1.00 on both; the party's table-tennis ball (3 m/s, turning
+    every 1.25 s) needs the window's narrower position fits: with the wide local-linear
+    fit alone the count was right in 0.72 of frames."""
     scene = getattr(synth, name)(300, seed=2)
     charges = sc.find_charges_sequence(scene.ray_frames(), seed=0, bounds=tuple(scene.room))
     counts = np.array([len(cs) for cs in charges])

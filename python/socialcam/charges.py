@@ -314,15 +314,20 @@ class ChargeOptions:
         ``merge_radius``, the same target); each attending ray gains what it gains in the
         frame rule; a source pays its Occam cost once, not once per frame. Sources start
         as the pooled pass's charges linked over frames; a source's position in a frame
-        is the local-linear fit of the rays attending it within ``pool_frames`` frames;
-        every person's attention is decoded over the whole sequence (Viterbi), and sources
-        are dropped while the likelihood grows. A frame's charges are the sources with
-        ``min_members`` rays attending. People are followed by their ``ids``. The window
-        resolves frames that the frame alone cannot (two close targets seen from far,
-        pairs of near-parallel rays); it cannot split a target that no frame found apart,
-        and it assumes targets that move smoothly (a position is a local-linear fit over
-        ``±pool_frames`` frames): a fast, oscillating target (the party's table-tennis
-        ball) is lost, so it is off by default
+        is the local-linear fit of the rays attending it within ``pool_frames`` frames
+        (lag weights of standard deviation ``pool_frames / 2``; a source that the
+        narrower fits — ``pool_frames / 4`` down to half a frame — reject in most of its
+        frames, a target that turns or bounces within the window like the party's
+        table-tennis ball, takes in each frame the widest fit that no narrower one
+        rejects); every person's attention is decoded over the whole sequence (Viterbi),
+        and sources are dropped while the likelihood grows. A frame's charges are the
+        sources with ``min_members`` rays attending. People are followed by their
+        ``ids``. The window resolves frames that the frame alone cannot (two close
+        targets seen from far, pairs of near-parallel rays); it cannot split a target
+        that no frame found apart. It needs people that can be followed over frames: give
+        every frame's rays their person ``ids`` (rows are taken as people otherwise);
+        when neither ids nor rows identify a person over frames, use ``False`` (the pooled
+        frame rule alone)
     switch_cost : ``joint_window`` only: the cost (nats) of a person changing target,
         ``ln(1/q)`` for a prior change probability ``q`` per frame (default ``ln 30``:
         people keep a target for about 3 s at 10 fps)
@@ -347,7 +352,7 @@ class ChargeOptions:
     bounds: tuple[tuple[float, float, float], tuple[float, float, float]] | None = None
     pool_frames: int = 10
     drift: float = 0.05
-    joint_window: bool = False
+    joint_window: bool = True
     switch_cost: float = float(np.log(30.0))
     region_level: float = 0.8
     region_max_radius: float = 10.0
@@ -497,8 +502,8 @@ def find_charges_sequence(
     second pass gives each frame's charges a position prior made of the charges found in
     the ``pool_frames`` frames before and after it (see :class:`ChargeOptions`): static
     or slow targets are then resolved in frames where the frame alone cannot tell two
-    close groups from one. With ``joint_window=True`` a third pass decides the charges of all
-    frames jointly: sources persist, people change target rarely (``switch_cost``), and a
+    close groups from one. With ``joint_window=True`` (the default) a third pass decides the
+    charges of all frames jointly: sources persist, people change target rarely (``switch_cost``), and a
     frame is read with its neighbours; people are followed over frames by their ``ids``.
     With ``pool_frames=0`` (or another rule) frame ``t`` of the
     result equals ``find_charges(frames[t], seed, ...)``. Each :class:`Charge` has

@@ -106,7 +106,7 @@ impl Default for ModeOptions {
             bounds: None,
             pool_frames: 10,
             drift: 0.05,
-            joint_window: false,
+            joint_window: true,
             switch_cost: SWITCH_COST,
             region_level: 0.8,
             region_max_radius: 10.0,

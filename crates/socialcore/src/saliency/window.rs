@@ -15,6 +15,11 @@
 //! local-linear fit (position and velocity, the velocity with a `N(0, drift²)` prior per
 //! axis) of the rays attending it within `pool_frames` frames of `t`, weighted by a
 //! Gaussian in the lag (standard deviation `pool_frames / 2`) and by `1/(s²h²)`.
+//! A target that turns or bounces within the window (the party's table-tennis ball) is
+//! not a local line over `±pool_frames` frames: each fit is compared with narrower ones
+//! (lag deviations halved down to half a frame), and a source whose wide fit lies outside
+//! a narrower fit's confidence ellipsoid in most of its frames takes, per frame, the
+//! widest fit that no narrower one rejects (Lepski's rule).
 //!
 //! The search: sources start as the per-frame charges (the pooled pass) linked over time
 //! by position (gated by their uncertainty plus the drift) when they share members or are
@@ -48,11 +53,19 @@ const REWEIGHTINGS: usize = 10;
 const FIT_TOL: f64 = 1e-6;
 /// Condition number above which a source's rays do not fix its position.
 const MAX_CONDITION: f64 = 1e10;
+/// Squared Mahalanobis distance beyond which a narrower position fit rejects a wider one
+/// (the 99.9 % point of χ² with 3 degrees of freedom).
+const BANDWIDTH_GATE: f64 = 16.3;
+/// A source whose wide fit is rejected in more than this fraction of its frames moves
+/// faster than the window's motion model: its positions take the bandwidth per frame.
+const ADAPT_FRACTION: f64 = 0.5;
 
 /// One frame's charge found by the window: its position and member rows.
 pub(super) type Found = (Vector3<f64>, Vec<usize>);
 
 type Mat6 = SMatrix<f64, 6, 6>;
+/// A source's position in a frame and its covariance, `None` where no ray fixes it.
+type Fit = Option<(Vector3<f64>, Matrix3<f64>)>;
 type Vec6 = SVector<f64, 6>;
 
 struct Model<'a> {
@@ -61,14 +74,13 @@ struct Model<'a> {
     /// `row[t][p]`: the row of person `p` in frame `t`.
     row: Vec<Vec<Option<usize>>>,
     n_people: usize,
-    n_sources: usize,
     ln_volume: f64,
     prior: f64,
 }
 
 /// Each source's position (and its covariance) per frame, `None` where no ray attends it
 /// within the window.
-type Positions = Vec<Vec<Option<(Vector3<f64>, Matrix3<f64>)>>>;
+type Positions = Vec<Vec<Fit>>;
 /// `z[t][row]`: the source a frame's ray attends.
 type Assign = Vec<Vec<Option<usize>>>;
 
@@ -149,79 +161,98 @@ impl Model<'_> {
         (z, sources.len())
     }
 
-    /// Source `k`'s local-linear position fit at every frame from the rays `z` gives it.
-    fn fit(
-        &self,
-        z: &Assign,
-        k: usize,
-        prev: &[Option<(Vector3<f64>, Matrix3<f64>)>],
-    ) -> Vec<Option<(Vector3<f64>, Matrix3<f64>)>> {
+    /// Source `k`'s local-linear position fit at every frame from the rays `z` gives it,
+    /// at the widest lag bandwidth of [`bandwidths`] that the narrower ones do not reject
+    /// (a residual test: a target that turns or bounces within the window — the party's
+    /// table-tennis ball — leaves the wide fit outside the narrow fits' confidence
+    /// ellipsoids, and its position is then taken from the narrower fit).
+    fn fit(&self, z: &Assign, k: usize, prev: &[Fit]) -> Vec<Fit> {
         let f = self.frames.len();
-        let w = self.opts.pool_frames;
-        let tau = (w as f64 / 2.0).max(0.5);
         let has: Vec<bool> = z.iter().map(|zt| zt.contains(&Some(k))).collect();
-        let ridge = 1.0 / (self.opts.drift * self.opts.drift).max(1e-12);
-        (0..f)
+        let taus = bandwidths(self.opts.pool_frames);
+        let fits: Vec<Vec<Fit>> = (0..f)
             .map(|t| {
-                let (lo, hi) = (t.saturating_sub(w), (t + w).min(f - 1));
-                if !has[lo..=hi].iter().any(|&b| b) {
-                    return None;
-                }
-                // Weighted least squares, the depths `s` of the weights `1/(s²h²)` from a
-                // reference position, then from the estimate itself.
-                let solve = |reference: &dyn Fn(usize) -> Option<Vector3<f64>>| {
-                    let mut m = Mat6::zeros();
-                    let mut b = Vec6::zeros();
-                    for u in (lo..=hi).filter(|&u| has[u]) {
-                        let rays = &self.frames[u];
-                        let lag = u as f64 - t as f64;
-                        let g = (-0.5 * (lag / tau).powi(2)).exp();
-                        let x_ref = reference(u);
-                        for i in (0..rays.len()).filter(|&i| z[u][i] == Some(k)) {
-                            let v = &rays.v[i];
-                            let s = x_ref
-                                .map_or(DEFAULT_DEPTH, |x| (x - rays.p[i]).dot(v).max(MIN_DEPTH));
-                            let proj = (Matrix3::identity() - v * v.transpose())
-                                * (g * rays.inv_h2[i] / (s * s));
-                            let pp = proj * rays.p[i];
-                            for (r, c, scale) in
-                                [(0, 0, 1.0), (0, 3, lag), (3, 0, lag), (3, 3, lag * lag)]
-                            {
-                                let mut blk = m.fixed_view_mut::<3, 3>(r, c);
-                                blk += proj * scale;
-                            }
-                            let mut top = b.fixed_rows_mut::<3>(0);
-                            top += pp;
-                            let mut bottom = b.fixed_rows_mut::<3>(3);
-                            bottom += pp * lag;
-                        }
-                    }
-                    for a in 3..6 {
-                        m[(a, a)] += ridge;
-                    }
-                    let inv = m.try_inverse()?;
-                    let x: Vector3<f64> = (inv * b).fixed_rows::<3>(0).into_owned();
-                    let cov: Matrix3<f64> = inv.fixed_view::<3, 3>(0, 0).into_owned();
-                    let eig = cov.symmetric_eigenvalues();
-                    let (lo_e, hi_e) = (eig.min(), eig.max());
-                    (lo_e > 0.0 && hi_e <= MAX_CONDITION * lo_e && x.iter().all(|c| c.is_finite()))
-                        .then_some((x, cov))
-                };
-                let mut est = solve(&|u| prev[t].or(prev[u]).map(|(x, _)| x))?;
-                for _ in 0..REWEIGHTINGS {
-                    let x0 = est.0;
-                    let Some(next) = solve(&|_| Some(x0)) else {
-                        break;
-                    };
-                    let moved = (next.0 - x0).norm();
-                    est = next;
-                    if moved < FIT_TOL {
-                        break;
-                    }
-                }
-                Some(est)
+                taus.iter()
+                    .map(|&tau| self.fit_at(z, k, &has, prev, t, tau))
+                    .collect()
+            })
+            .collect();
+        let picks: Vec<Option<usize>> = fits.iter().map(|ft| select_bandwidth(ft)).collect();
+        let n = picks.iter().flatten().count();
+        let rejected = picks.iter().flatten().filter(|&&j| j > 0).count();
+        let adapt = rejected as f64 > ADAPT_FRACTION * n as f64;
+        fits.into_iter()
+            .zip(picks)
+            .map(|(ft, j)| match (adapt, j) {
+                (true, Some(j)) => ft[j],
+                _ => ft[0].or(j.and_then(|j| ft[j])),
             })
             .collect()
+    }
+
+    /// The fit of source `k` at frame `t` with lag bandwidth `tau` (frames): weighted least
+    /// squares, the depths `s` of the weights `1/(s²h²)` from a reference position, then
+    /// from the estimate itself until it settles.
+    fn fit_at(&self, z: &Assign, k: usize, has: &[bool], prev: &[Fit], t: usize, tau: f64) -> Fit {
+        let f = self.frames.len();
+        let w = self.opts.pool_frames;
+        let ridge = 1.0 / (self.opts.drift * self.opts.drift).max(1e-12);
+        let (lo, hi) = (t.saturating_sub(w), (t + w).min(f - 1));
+        if !has[lo..=hi].iter().any(|&b| b) {
+            return None;
+        }
+        let solve = |reference: &dyn Fn(usize) -> Option<Vector3<f64>>| {
+            let mut m = Mat6::zeros();
+            let mut b = Vec6::zeros();
+            for u in (lo..=hi).filter(|&u| has[u]) {
+                let rays = &self.frames[u];
+                let lag = u as f64 - t as f64;
+                let g = (-0.5 * (lag / tau).powi(2)).exp();
+                if g < 1e-12 {
+                    continue;
+                }
+                let x_ref = reference(u);
+                for i in (0..rays.len()).filter(|&i| z[u][i] == Some(k)) {
+                    let v = &rays.v[i];
+                    let s = x_ref.map_or(DEFAULT_DEPTH, |x| (x - rays.p[i]).dot(v).max(MIN_DEPTH));
+                    let proj =
+                        (Matrix3::identity() - v * v.transpose()) * (g * rays.inv_h2[i] / (s * s));
+                    let pp = proj * rays.p[i];
+                    for (r, c, scale) in [(0, 0, 1.0), (0, 3, lag), (3, 0, lag), (3, 3, lag * lag)]
+                    {
+                        let mut blk = m.fixed_view_mut::<3, 3>(r, c);
+                        blk += proj * scale;
+                    }
+                    let mut top = b.fixed_rows_mut::<3>(0);
+                    top += pp;
+                    let mut bottom = b.fixed_rows_mut::<3>(3);
+                    bottom += pp * lag;
+                }
+            }
+            for a in 3..6 {
+                m[(a, a)] += ridge;
+            }
+            let inv = m.try_inverse()?;
+            let x: Vector3<f64> = (inv * b).fixed_rows::<3>(0).into_owned();
+            let cov: Matrix3<f64> = inv.fixed_view::<3, 3>(0, 0).into_owned();
+            let eig = cov.symmetric_eigenvalues();
+            let (lo_e, hi_e) = (eig.min(), eig.max());
+            (lo_e > 0.0 && hi_e <= MAX_CONDITION * lo_e && x.iter().all(|c| c.is_finite()))
+                .then_some((x, cov))
+        };
+        let mut est = solve(&|u| prev[t].or(prev[u]).map(|(x, _)| x))?;
+        for _ in 0..REWEIGHTINGS {
+            let x0 = est.0;
+            let Some(next) = solve(&|_| Some(x0)) else {
+                break;
+            };
+            let moved = (next.0 - x0).norm();
+            est = next;
+            if moved < FIT_TOL {
+                break;
+            }
+        }
+        Some(est)
     }
 
     fn inside(&self, x: &Vector3<f64>) -> bool {
@@ -267,7 +298,7 @@ impl Model<'_> {
             if let Some(i) = self.row[t][p] {
                 let rays = &self.frames[t];
                 let gain = (2.0 * rays.inv_h2[i]).ln() + self.prior - (k_t[t].max(1) as f64).ln();
-                for k in 0..self.n_sources {
+                for k in 0..alive.len() {
                     if !alive[k] || forbid[t][k] {
                         continue;
                     }
@@ -280,7 +311,7 @@ impl Model<'_> {
                 }
             } else {
                 // Absent: no evidence, every source that exists stays possible.
-                for k in 0..self.n_sources {
+                for k in 0..alive.len() {
                     if alive[k] && pos[k][t].is_some() {
                         st.push((k + 1, 0.0));
                     }
@@ -333,14 +364,14 @@ impl Model<'_> {
         let f = self.frames.len();
         let min = self.opts.min_members;
         let counts = |z: &Assign, t: usize| -> Vec<usize> {
-            let mut c = vec![0; self.n_sources];
+            let mut c = vec![0; alive.len()];
             z[t].iter().flatten().for_each(|&k| c[k] += 1);
             c
         };
         let mut k_t: Vec<usize> = (0..f)
             .map(|t| counts(z, t).iter().filter(|&&c| c >= min).count())
             .collect();
-        let mut forbid = vec![vec![false; self.n_sources]; f];
+        let mut forbid = vec![vec![false; alive.len()]; f];
         let mut out: Assign = Vec::new();
         let mut total = 0.0;
         for _ in 0..DECODE_ROUNDS {
@@ -361,7 +392,7 @@ impl Model<'_> {
             for t in 0..f {
                 let c = counts(&out, t);
                 let k_new = c.iter().filter(|&&n| n >= min).count();
-                for k in 0..self.n_sources {
+                for k in 0..alive.len() {
                     if c[k] > 0 && c[k] < min {
                         forbid[t][k] = true;
                         settled = false;
@@ -411,11 +442,40 @@ impl Model<'_> {
     }
 
     fn objective(&self, z: &Assign, pos: &Positions, alive: &[bool], ll: f64) -> f64 {
-        ll - (0..self.n_sources)
+        ll - (0..alive.len())
             .filter(|&k| alive[k])
             .map(|k| self.occam(z, pos, k))
             .sum::<f64>()
     }
+}
+
+/// The lag bandwidths (standard deviations, frames) of the position fits, widest first:
+/// `pool_frames / 2`, then halving down to half a frame.
+fn bandwidths(pool_frames: usize) -> Vec<f64> {
+    let mut out = vec![(pool_frames as f64 / 2.0).max(0.5)];
+    while out[out.len() - 1] > 0.5 {
+        let next = (out[out.len() - 1] / 2.0).max(0.5);
+        out.push(next);
+    }
+    out
+}
+
+/// The widest fit that lies within every narrower fit's confidence ellipsoid (squared
+/// Mahalanobis distance at most [`BANDWIDTH_GATE`]), Lepski's rule; narrower fits that do
+/// not exist (too few rays to fix a point) do not vote.
+fn select_bandwidth(fits: &[Fit]) -> Option<usize> {
+    let agrees = |j: usize| {
+        let (x, _) = fits[j].as_ref()?;
+        let ok = fits[j + 1..].iter().flatten().all(|(y, cov)| {
+            let d = x - y;
+            cov.cholesky()
+                .map_or(true, |ch| d.dot(&ch.solve(&d)) <= BANDWIDTH_GATE)
+        });
+        ok.then_some(j)
+    };
+    (0..fits.len())
+        .find_map(agrees)
+        .or_else(|| (0..fits.len()).rev().find(|&j| fits[j].is_some()))
 }
 
 /// The joint window decision over a whole sequence, from the per-frame charges `stage`
@@ -455,14 +515,13 @@ pub(super) fn joint_window(
         opts,
         row,
         n_people: people.len(),
-        n_sources,
         ln_volume: volume.ln(),
         prior: ((1.0 - opts.unattended) / opts.unattended).ln(),
     };
     let mut alive = vec![true; n_sources];
     let mut pos: Positions = vec![vec![None; f]; n_sources];
     for _ in 0..ROUNDS {
-        pos = (0..n_sources)
+        pos = (0..alive.len())
             .into_par_iter()
             .map(|k| {
                 if alive[k] {
@@ -481,7 +540,7 @@ pub(super) fn joint_window(
         // Then one drop at a time while the likelihood grows.
         loop {
             let mut pick: Option<(usize, f64, Assign)> = None;
-            let live: Vec<usize> = (0..n_sources).filter(|&k| alive[k]).collect();
+            let live: Vec<usize> = (0..alive.len()).filter(|&k| alive[k]).collect();
             for k in live {
                 alive[k] = false;
                 let (z2, ll2) = model.solve(&z, &pos, &alive)?;
@@ -507,7 +566,7 @@ pub(super) fn joint_window(
     }
     Ok((0..f)
         .map(|t| {
-            (0..n_sources)
+            (0..alive.len())
                 .filter_map(|k| {
                     let members: Vec<usize> =
                         (0..z[t].len()).filter(|&i| z[t][i] == Some(k)).collect();
@@ -517,4 +576,39 @@ pub(super) fn joint_window(
                 .collect()
         })
         .collect())
+}
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+
+    fn fit(x: f64, sd: f64) -> Fit {
+        Some((Vector3::new(x, 0.0, 0.0), Matrix3::identity() * (sd * sd)))
+    }
+
+    #[test]
+    fn bandwidth_ladder_halves_to_half_a_frame() {
+        assert_eq!(bandwidths(10), vec![5.0, 2.5, 1.25, 0.625, 0.5]);
+        assert_eq!(bandwidths(1), vec![0.5]);
+    }
+
+    #[test]
+    fn narrower_fits_reject_a_wide_fit_outside_their_ellipsoids() {
+        // Wide fit within 4 σ of every narrower one: kept.
+        assert_eq!(
+            select_bandwidth(&[fit(0.0, 0.01), fit(0.03, 0.01), fit(-0.03, 0.02)]),
+            Some(0)
+        );
+        // Wide fit 10 σ from the narrowest: the first fit that all narrower ones accept.
+        assert_eq!(
+            select_bandwidth(&[fit(0.0, 0.01), fit(0.9, 0.05), fit(1.0, 0.1)]),
+            Some(1)
+        );
+        // Missing fits do not vote; no fit at all gives none.
+        assert_eq!(
+            select_bandwidth(&[fit(0.0, 0.01), None, fit(0.02, 0.1)]),
+            Some(0)
+        );
+        assert_eq!(select_bandwidth(&[None, None]), None);
+    }
 }
