@@ -24,7 +24,8 @@
 //!   tree passes `2n` nodes (the search then restarts from the root) —, the
 //!   triangle inequalities enter as Lagrangian terms `γ_t g_t(b) ≤ 0` added to `f` (still a
 //!   binary quadratic, below `f` on binary points), their multipliers fitted at the root
-//!   by subgradient ascent on the SDP bound with separation, and re-fitted at every node by
+//!   by subgradient ascent on the SDP bound with separation (a full scan of the triples
+//!   every 8 steps, a pool of the most violated ones re-checked in between), and re-fitted at every node by
 //!   a few warm-started steps (kept only when they beat the parent's). On Beasley n = 100
 //!   instances this cut the trees 5–40× against the SDP bound alone.
 //! * **Variable fixing**: first-order dominance (a persistency argument: a variable whose
