@@ -26,6 +26,7 @@ from __future__ import annotations
 
 import argparse
 import json
+import os
 import shutil
 import time
 import warnings
@@ -86,6 +87,7 @@ def main() -> None:
         out = scene / (("run" if args.fps == 10.0 else f"run_fps{args.fps:g}") + tag)
         # a fresh run every time: the stage cache of an earlier run would skip the work timed
         shutil.rmtree(out, ignore_errors=True)
+        load = os.getloadavg()[0]  # other work on the machine inflates the wall time
         t0, c0 = time.perf_counter(), time.process_time()
         with warnings.catch_warnings():
             warnings.simplefilter("ignore", RunWarning)
@@ -110,7 +112,10 @@ def main() -> None:
             truth,
             acc["alignment"]["scale"],
         )
-        print(f"\n=== seed {seed}: run {wall:.1f} s wall, {cpu:.1f} s CPU (loaded machine)")
+        print(
+            f"\n=== seed {seed}: run {wall:.1f} s wall, {cpu:.1f} s CPU "
+            f"(load average {load:.1f} at the start)"
+        )
         print("stages:", ", ".join(f"{k} {v['seconds']:.1f}s" for k, v in rep["stages"].items()))
         print("CPU:", ", ".join(f"{k} {v['cpu_seconds']:.1f}s" for k, v in rep["stages"].items()))
         print("sfm:", ", ".join(f"{k} {v:.1f}s" for k, v in rep["sfm_timings"].items()))
