@@ -122,7 +122,8 @@ def test_pose_model_on_a_real_photograph():
     eyes = face.landmarks[0, :2]
     iod = float(np.linalg.norm(eyes[1] - eyes[0]))
     mid = eyes.mean(axis=0)
-    assert np.abs(j["Head"] - mid).max() < 0.35 * iod, (j["Head"], mid, iod)
+    # ear midpoint 0.16 iod from the eye midpoint; the nose (a wrong head point) is 0.29 iod
+    assert np.abs(j["Head"] - mid).max() < 0.22 * iod, (j["Head"], mid, iod)
     ls, rs = j["LeftShoulder"], j["RightShoulder"]
     assert ls[0] > mid[0] + iod and rs[0] < mid[0] - iod  # frontal: the person's left on the right
     assert min(ls[1], rs[1]) > mid[1] + 1.5 * iod
