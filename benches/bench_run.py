@@ -56,6 +56,16 @@ def _centre_errors(rec, truth) -> np.ndarray:
     return np.concatenate(out)
 
 
+def parse_options(items: list[str]) -> dict:
+    """``KEY=VALUE`` strings → :class:`RunOptions` overrides, typed like the defaults."""
+    extra = {}
+    for item in items:
+        k, _, v = item.partition("=")
+        default = getattr(RunOptions(), k)
+        extra[k] = v == "True" if isinstance(default, bool) else type(default)(v)
+    return extra
+
+
 def main() -> None:
     ap = argparse.ArgumentParser()
     ap.add_argument("seeds", type=int, nargs="+")
@@ -68,11 +78,7 @@ def main() -> None:
         "--option", action="append", default=[], help="a RunOptions field, KEY=VALUE (repeatable)"
     )
     args = ap.parse_args()
-    extra = {}
-    for item in args.option:
-        k, _, v = item.partition("=")
-        default = getattr(RunOptions(), k)
-        extra[k] = v == "True" if isinstance(default, bool) else type(default)(v)
+    extra = parse_options(args.option)
     tag = "".join(f"_{k}{v}" for k, v in extra.items())
     rows = []
     for seed in args.seeds:
