@@ -133,3 +133,5 @@ def test_pose_model_on_a_real_photograph():
     assert detect_body_joints(np.zeros((64, 48, 3), np.uint8))[0].shape == (0, len(BODY_JOINTS), 2)
     with pytest.raises(ValueError, match="images"):
         detect_body_joints([np.zeros((8, 8), np.uint8)])
+    with pytest.raises(ValueError, match="images: photo 1 is empty"):
+        detect_body_joints([img, np.zeros((0, 5, 3), np.uint8)])

@@ -364,6 +364,8 @@ def detect_body_joints(
     for i, im in enumerate(imgs):
         if im.ndim != 3 or im.shape[2] != 3 or im.dtype != np.uint8:
             raise ValueError(f"images: photo {i} is not an (H, W, 3) uint8 RGB image")
+        if im.shape[0] == 0 or im.shape[1] == 0:
+            raise ValueError(f"images: photo {i} is empty ({im.shape[0]}×{im.shape[1]} pixels)")
     try:
         with warnings.catch_warnings():
             warnings.simplefilter("ignore")  # protobuf deprecation notices on import
