@@ -452,7 +452,6 @@ fn dive(
                     &fix,
                     &mut worker.mix,
                     triangles::NODE_STEPS,
-                    0,
                     gap,
                     clock,
                 );
@@ -761,7 +760,9 @@ pub fn solve_bqp(problem: &BqpProblem, options: &BqpOptions) -> Result<BqpSoluti
 
     // Convexifying shift (QCR from the SDP), tuned on the root relaxation.
     let root_cut = cutoff(&model, options, best_f);
-    let (mut root_bound, node_sdp) = shift::choose_shift(&mut model, &clock, root_cut);
+    let mut mix = sdp::Mixing::new(n);
+    let (mut root_bound, node_sdp) =
+        shift::choose_shift(&mut model, &clock, root_cut, &mut mix, false);
     model.node_sdp = node_sdp;
     crate::interrupt::check()?;
     // Triangle cuts (Lagrangian) when the SDP bound does not close the root and `Q` is
@@ -803,9 +804,19 @@ pub fn solve_bqp(problem: &BqpProblem, options: &BqpOptions) -> Result<BqpSoluti
         if cuts_pending && nodes >= cuts_after && !clock.out() {
             cuts_pending = false;
             let cut = cutoff(&model, options, best_f);
-            if let Some((cuts, _)) = triangles::strengthen(&model, &clock, best_f, plain_root) {
+            if let Some((cuts, _)) = triangles::strengthen(
+                &model,
+                &clock,
+                best_f,
+                plain_root,
+                &mut mix,
+                options.parallel && n >= PARALLEL_MIN_N,
+            ) {
                 let mut lm = triangles::lagrangian_model(&model, &cuts);
-                let (b, sdp) = shift::choose_shift(&mut lm, &clock, cut);
+                // A fresh factor: warm from the ascent's last iterate, the SDP's stopping
+                // test fired early (weaker roots; seed 2 of the bench, 3 → 25 nodes).
+                let (b, sdp) =
+                    shift::choose_shift(&mut lm, &clock, cut, &mut sdp::Mixing::new(n), true);
                 if b > plain_root && sdp {
                     root_bound = root_bound.max(b);
                     heap.clear();

@@ -24,23 +24,50 @@ use rand_chacha::ChaCha8Rng;
 /// homogenising `z₀`), kept between solves as a warm start; fixed variables' rows are
 /// ignored and folded into the linear row.
 pub(crate) struct Mixing {
+    /// Row stride of `v`: the rank rounded up to a multiple of 4, the extra columns zero
+    /// (they stay zero: same iterates as without them, in whole 4-wide vectors).
     pub(crate) k: usize,
     pub(crate) v: Vec<f64>,
     g: Vec<f64>,
     /// `C_0i` of the current node (zero for fixed `i`).
     lin: Vec<f64>,
-    /// `|g_i|` at the last sweep.
-    gnorm: Vec<f64>,
+    /// The free-free part of `C` of the current node, compressed by rows (`start`, then
+    /// column and value `W_ij / 4`): built once per solve, so the sweeps run without
+    /// testing which variables are fixed.
+    start: Vec<usize>,
+    col: Vec<u32>,
+    val: Vec<f64>,
+    /// Scratch of [`Mixing::load`]: position of a column in the row being built.
+    pos: Vec<u32>,
+    ext: Extra,
+}
+
+/// When [`Mixing::run`] stops: after `max_sweeps`, a relative change below `tol` over a
+/// sweep, or the clock.
+pub(crate) struct Stop<'a> {
+    pub max_sweeps: usize,
+    pub tol: f64,
+    pub clock: &'a Clock,
+}
+
+/// Extra pair entries bucketed by row (scratch of [`Mixing::load`]).
+#[derive(Default)]
+struct Extra {
+    start: Vec<usize>,
+    fill: Vec<usize>,
+    entries: Vec<(usize, f64)>,
 }
 
 impl Mixing {
     /// Random unit rows (fixed seed), rank `⌈√(2(n+1))⌉ + 1`.
     pub fn new(n: usize) -> Self {
         let m = n + 1;
-        let k = ((2.0 * m as f64).sqrt().ceil() as usize + 1).min(m).max(2);
+        let rank = ((2.0 * m as f64).sqrt().ceil() as usize + 1).min(m).max(2);
+        let k = rank.div_ceil(4) * 4;
         let mut rng = ChaCha8Rng::seed_from_u64(0x05ee_db0b);
         let mut v = vec![0.0; m * k];
         for r in v.chunks_mut(k) {
+            let r = &mut r[..rank];
             let mut norm = 0.0f64;
             for x in r.iter_mut() {
                 *x = rng.random_range(-1.0..1.0);
@@ -56,42 +83,12 @@ impl Mixing {
             v,
             g: vec![0.0; k],
             lin: vec![0.0; n],
-            gnorm: vec![0.0; m],
+            start: Vec::with_capacity(n + 1),
+            col: Vec::new(),
+            val: Vec::new(),
+            pos: Vec::new(),
+            ext: Extra::default(),
         }
-    }
-
-    /// `g = Σ_j C_ij v_j` for the free row `i` (or the homogenising row `i = n`).
-    #[inline(always)]
-    fn row_gradient(&mut self, model: &Model, fix: &[i8], i: usize) -> f64 {
-        let (n, k) = (model.n, self.k);
-        self.g.fill(0.0);
-        if i == n {
-            for j in 0..n {
-                let c = self.lin[j];
-                if c != 0.0 {
-                    let vj = &self.v[j * k..(j + 1) * k];
-                    for (ga, va) in self.g.iter_mut().zip(vj) {
-                        *ga += c * va;
-                    }
-                }
-            }
-        } else {
-            let c = self.lin[i];
-            let v0 = &self.v[n * k..(n + 1) * k];
-            for (ga, va) in self.g.iter_mut().zip(v0) {
-                *ga += c * va;
-            }
-            for &(j, w) in &model.adj[i] {
-                if fix[j] == FREE {
-                    let c = 0.25 * w;
-                    let vj = &self.v[j * k..(j + 1) * k];
-                    for (ga, va) in self.g.iter_mut().zip(vj) {
-                        *ga += c * va;
-                    }
-                }
-            }
-        }
-        self.g.iter().map(|a| a * a).sum::<f64>().sqrt()
     }
 
     /// Mixing-method sweeps on the SDP of the node `fix` (fixed variables substituted),
@@ -108,72 +105,205 @@ impl Mixing {
         clock: &Clock,
         s: &mut [f64],
     ) -> usize {
-        // The sweeps are k-wide axpys: vectorised by `with_avx2`.
-        super::with_avx2(|| {
-            let (n, k) = (model.n, self.k);
-            for i in 0..n {
-                self.lin[i] = if fix[i] == FREE {
-                    let mut acc = model.h[i];
-                    for &(j, w) in &model.adj[i] {
-                        match fix[j] {
-                            FREE => acc += w,
-                            1 => acc += 2.0 * w,
-                            _ => {}
+        self.load(&model.h, &model.adj, &[], fix);
+        self.run(
+            fix,
+            Stop {
+                max_sweeps,
+                tol,
+                clock,
+            },
+            s,
+        )
+    }
+
+    /// Loads the SDP of the node `fix` of `f(b) = Σ h_i b_i + Σ_{i≠j} W_ij b_i b_j`, with
+    /// `W` given by the rows `adj` plus `extra` entries `(a, b, w)`, each adding `w` to
+    /// `W_ab` and `W_ba` (the pair terms of Lagrangian cuts: no dense matrix is built).
+    pub(crate) fn load(
+        &mut self,
+        h: &[f64],
+        adj: &[Vec<(usize, f64)>],
+        extra: &[(usize, usize, f64)],
+        fix: &[i8],
+    ) {
+        let n = h.len();
+        // The extra entries bucketed by row (both directions).
+        let ext = &mut self.ext;
+        ext.start.clear();
+        ext.start.resize(n + 1, 0);
+        for &(a, b, _) in extra {
+            ext.start[a + 1] += 1;
+            ext.start[b + 1] += 1;
+        }
+        for i in 0..n {
+            ext.start[i + 1] += ext.start[i];
+        }
+        ext.entries.resize(2 * extra.len(), (0, 0.0));
+        ext.fill.clear();
+        ext.fill.extend_from_slice(&ext.start[..n]);
+        for &(a, b, w) in extra {
+            ext.entries[ext.fill[a]] = (b, w);
+            ext.fill[a] += 1;
+            ext.entries[ext.fill[b]] = (a, w);
+            ext.fill[b] += 1;
+        }
+        self.start.clear();
+        self.col.clear();
+        self.val.clear();
+        const NONE: u32 = u32::MAX;
+        self.pos.resize(n, NONE);
+        for i in 0..n {
+            self.start.push(self.col.len());
+            if fix[i] != FREE {
+                self.lin[i] = 0.0;
+                continue;
+            }
+            let row0 = self.col.len();
+            let mut acc = h[i];
+            let own = &ext.entries[ext.start[i]..ext.start[i + 1]];
+            for &(j, w) in adj[i].iter().chain(own) {
+                match fix[j] {
+                    FREE => {
+                        acc += w;
+                        let p = self.pos[j];
+                        if p == NONE {
+                            self.pos[j] = self.col.len() as u32;
+                            self.col.push(j as u32);
+                            self.val.push(0.25 * w);
+                        } else {
+                            self.val[p as usize] += 0.25 * w;
                         }
                     }
-                    0.25 * acc
-                } else {
-                    0.0
-                };
-            }
-            let mut prev = f64::INFINITY;
-            let mut sweeps = 0;
-            while sweeps < max_sweeps {
-                sweeps += 1;
-                let mut obj = 0.0;
-                for i in 0..=n {
-                    if i < n && fix[i] != FREE {
-                        continue;
-                    }
-                    let norm = self.row_gradient(model, fix, i);
-                    self.gnorm[i] = norm;
-                    if norm > 0.0 {
-                        let vi = &mut self.v[i * k..(i + 1) * k];
-                        for (va, ga) in vi.iter_mut().zip(&self.g) {
-                            *va = -ga / norm;
-                        }
-                    }
-                    // ⟨C, VVᵀ⟩ = Σ_i v_i·g_i, and v_i·g_i = −|g_i| after the update
-                    // (approximately: earlier rows' g are stale; fine for a stopping test).
-                    obj -= norm;
-                }
-                if (prev - obj).abs() <= tol * obj.abs().max(1.0) {
-                    break;
-                }
-                prev = obj;
-                if sweeps % 4 == 0 && clock.out() {
-                    break;
+                    1 => acc += 2.0 * w,
+                    _ => {}
                 }
             }
-            // Final multipliers from the converged (or last) V.
-            for i in 0..n {
-                s[i] = if fix[i] == FREE {
-                    4.0 * self.row_gradient(model, fix, i)
-                } else {
-                    0.0
-                };
+            for &j in &self.col[row0..] {
+                self.pos[j as usize] = NONE;
             }
-            sweeps
+            self.lin[i] = 0.25 * acc;
+        }
+        self.start.push(self.col.len());
+    }
+
+    /// Sweeps on the loaded SDP (see [`Mixing::solve`]).
+    pub(crate) fn run(&mut self, fix: &[i8], stop: Stop, s: &mut [f64]) -> usize {
+        let n = self.lin.len();
+        // The sweeps are k-wide axpys: vectorised by `with_avx2`, with the gradient held in
+        // registers for the usual ranks.
+        super::with_avx2(|| match self.k {
+            4 => self.sweeps::<4>(n, fix, &stop, s),
+            8 => self.sweeps::<8>(n, fix, &stop, s),
+            12 => self.sweeps::<12>(n, fix, &stop, s),
+            16 => self.sweeps::<16>(n, fix, &stop, s),
+            20 => self.sweeps::<20>(n, fix, &stop, s),
+            24 => self.sweeps::<24>(n, fix, &stop, s),
+            28 => self.sweeps::<28>(n, fix, &stop, s),
+            32 => self.sweeps::<32>(n, fix, &stop, s),
+            _ => self.sweeps::<0>(n, fix, &stop, s),
         })
     }
-}
 
-/// The QCR shift (before positive-definite repair) from mixing-method sweeps on the SDP of
-/// the whole problem from a random start (see [`Mixing::solve`]).
-pub(crate) fn qcr_shift(model: &Model, clock: &Clock, max_sweeps: usize, tol: f64) -> Vec<f64> {
-    let n = model.n;
-    let mut mix = Mixing::new(n);
-    let mut s = vec![0.0; n];
-    mix.solve(model, &vec![FREE; n], max_sweeps, tol, clock, &mut s);
-    s
+    /// Calls `axpy(C_ij, j)` for every nonzero `C_ij` of the free row `i` (or the
+    /// homogenising row `i = n`), the homogenising column first.
+    #[inline(always)]
+    fn for_row(&self, n: usize, i: usize, mut axpy: impl FnMut(f64, usize)) {
+        if i == n {
+            for (j, &c) in self.lin.iter().enumerate() {
+                if c != 0.0 {
+                    axpy(c, j);
+                }
+            }
+        } else {
+            axpy(self.lin[i], n);
+            let (a, b) = (self.start[i], self.start[i + 1]);
+            for (&j, &c) in self.col[a..b].iter().zip(&self.val[a..b]) {
+                axpy(c, j as usize);
+            }
+        }
+    }
+
+    /// `g = Σ_j C_ij v_j` for the free row `i` (or the homogenising row `i = n`) into
+    /// `self.g`; returns `|g|`. `K` is the row stride (the gradient then lives in
+    /// registers), or 0 for the run-time `self.k`.
+    #[inline(always)]
+    fn row_gradient<const K: usize>(&mut self, n: usize, i: usize) -> f64 {
+        let v = &self.v;
+        if K == 0 {
+            let k = self.k;
+            let mut g = std::mem::take(&mut self.g);
+            g.fill(0.0);
+            self.for_row(n, i, |c, j| {
+                for (ga, va) in g.iter_mut().zip(&v[j * k..(j + 1) * k]) {
+                    *ga += c * va;
+                }
+            });
+            let norm = g.iter().map(|a| a * a).sum::<f64>().sqrt();
+            self.g = g;
+            return norm;
+        }
+        let mut g = [0.0f64; K];
+        self.for_row(n, i, |c, j| {
+            let vj: &[f64; K] = v[j * K..(j + 1) * K].try_into().expect("stride K");
+            for t in 0..K {
+                g[t] += c * vj[t];
+            }
+        });
+        self.g[..K].copy_from_slice(&g);
+        g.iter().map(|a| a * a).sum::<f64>().sqrt()
+    }
+
+    #[inline(always)]
+    fn sweeps<const K: usize>(
+        &mut self,
+        n: usize,
+        fix: &[i8],
+        stop: &Stop,
+        s: &mut [f64],
+    ) -> usize {
+        let Stop {
+            max_sweeps,
+            tol,
+            clock,
+        } = *stop;
+        let k = self.k;
+        let mut prev = f64::INFINITY;
+        let mut sweeps = 0;
+        while sweeps < max_sweeps {
+            sweeps += 1;
+            let mut obj = 0.0;
+            for i in 0..=n {
+                if i < n && fix[i] != FREE {
+                    continue;
+                }
+                let norm = self.row_gradient::<K>(n, i);
+                if norm > 0.0 {
+                    let vi = &mut self.v[i * k..(i + 1) * k];
+                    for (va, ga) in vi.iter_mut().zip(&self.g) {
+                        *va = -ga / norm;
+                    }
+                }
+                // ⟨C, VVᵀ⟩ = Σ_i v_i·g_i, and v_i·g_i = −|g_i| after the update
+                // (approximately: earlier rows' g are stale; fine for a stopping test).
+                obj -= norm;
+            }
+            if (prev - obj).abs() <= tol * obj.abs().max(1.0) {
+                break;
+            }
+            prev = obj;
+            if sweeps % 4 == 0 && clock.out() {
+                break;
+            }
+        }
+        // Final multipliers from the converged (or last) V.
+        for i in 0..n {
+            s[i] = if fix[i] == FREE {
+                4.0 * self.row_gradient::<K>(n, i)
+            } else {
+                0.0
+            };
+        }
+        sweeps
+    }
 }

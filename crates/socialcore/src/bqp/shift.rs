@@ -63,8 +63,16 @@ pub(crate) fn eig_seconds(n: usize) -> f64 {
 /// Sets the shift of `model` (see the module docs). Returns the root bound of the chosen
 /// shift (`−∞` if the clock ran out before a root relaxation finished) and whether the SDP
 /// shift won (then the nodes recompute it too). `cut` is the pruning threshold of the
-/// incumbent: a root bound reaching it ends the work early.
-pub(crate) fn choose_shift(model: &mut Model, clock: &Clock, cut: f64) -> (f64, bool) {
+/// incumbent: a root bound reaching it ends the work early. The SDP runs on `mix` (warm
+/// when it already holds a nearby factor; left there for the caller). With `sdp_only` the
+/// problem's own diagonal is not tried (the caller knows the SDP shift wins).
+pub(crate) fn choose_shift(
+    model: &mut Model,
+    clock: &Clock,
+    cut: f64,
+    mix: &mut sdp::Mixing,
+    sdp_only: bool,
+) -> (f64, bool) {
     let n = model.n;
     let margin = model.margin;
 
@@ -96,7 +104,10 @@ pub(crate) fn choose_shift(model: &mut Model, clock: &Clock, cut: f64) -> (f64, 
     // Candidate B first: the problem's own diagonal, shifted to the margin (one eigenvalue
     // decomposition). When its root bound already reaches `cut` the root is solved and the
     // SDP (tens of milliseconds) is skipped.
-    if let Some(cand) = repaired(model, model.qdiag.clone()) {
+    if let Some(cand) = (!sdp_only)
+        .then(|| repaired(model, model.qdiag.clone()))
+        .flatten()
+    {
         set_shift(model, &cand);
         let (b, xb) = root_bound(model, &mut solver, clock);
         if b > best {
@@ -110,7 +121,8 @@ pub(crate) fn choose_shift(model: &mut Model, clock: &Clock, cut: f64) -> (f64, 
     // Candidate A: the SDP (QCR) shift.
     let mut sdp_won = false;
     if !clock.out() {
-        let sdp = sdp::qcr_shift(model, clock, SDP_SWEEPS, 1e-8);
+        let mut sdp = vec![0.0; n];
+        mix.solve(model, &vec![FREE; n], SDP_SWEEPS, 1e-8, clock, &mut sdp);
         if let Some(cand) = repaired(model, sdp) {
             if !clock.out() {
                 set_shift(model, &cand);

