@@ -12,7 +12,7 @@ uniform in [−100, 100], seeds 0, 1, …). Beasley *maximises* ``xᵀSx``; ever
 minimises ``xᵀQx`` with ``Q = −S``, so the minima printed are the negated maxima.
 
 Run: python benches/bench_bqp.py [--cap SECONDS] [--n100 10] [--n150 3] [--no-highs]
-[--no-scip] [--serial]. "cpu s" is the process CPU time of our solve (all threads).
+[--no-scip] [--serial] [--first-seed 0]. "cpu s" is the process CPU time of our solve (all threads).
 """
 
 from __future__ import annotations
@@ -180,6 +180,7 @@ def main() -> None:
     ap.add_argument("--cap", type=float, default=60.0, help="time cap per solve, seconds")
     ap.add_argument("--n100", type=int, default=10, help="Beasley n = 100 instances")
     ap.add_argument("--n150", type=int, default=3, help="Beasley n = 150 instances")
+    ap.add_argument("--first-seed", type=int, default=0, help="seed of the first Beasley instance")
     ap.add_argument("--no-highs", action="store_true")
     ap.add_argument("--no-scip", action="store_true")
     ap.add_argument("--no-articulated", action="store_true")
@@ -194,7 +195,7 @@ def main() -> None:
             S = read_qubo(p)
             inst.append((p.stem, S, np.zeros(len(S))))
     for n, count in ((100, args.n100), (150, args.n150)):
-        for seed in range(count):
+        for seed in range(args.first_seed, args.first_seed + count):
             inst.append((f"beasley{n}-s{seed}", beasley(n, seed), np.zeros(n)))
     print(
         f"{'instance':22s} {'n':>4s} {'ours s':>8s} {'cpu s':>8s} {'opt':>4s} {'nodes':>7s} "
