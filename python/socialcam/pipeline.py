@@ -286,14 +286,16 @@ class RunOptions:
         joint mode (about 2 ``h``), though both are within ``member_sigma`` of the target:
         no charge holds both (an extension of Sec 6.2, ``pair_candidates`` of
         :class:`socialcam.ChargeOptions`, adds a candidate at their least-squares
-        intersection for rays that are members of no mode). Most such pairs are rays
+        intersection when no mode holds both). Most such pairs are rays
         aimed at different things, so a pair's candidate is kept only where it bridges
         the group's own modes: a mode of at least ``min_members`` of the same members lies
         within 0.5 m of it both before and after, at most this far away. On the true
-        cameras of rendered scenes (seeds 1-32) joint attention is then found in 97.5 %
-        of the frames instead of 95.9 % (seed 27: 71 % → 100 %, 32: 79 % → 85 %), the
-        false charges 62.6 % as before; kept without the bridge the candidates found as
-        often with 64.4 % false; 1 s or 2 s instead of 0.5 s gave 97.6 % and 62.8 %.
+        cameras of rendered scenes joint attention is found in 98.3 % instead of 95.9 % of
+        the frames (seeds 1-32, used in development; seed 27: 71 % → 100 %, 32: 79 % →
+        100 %) and 97.3 % instead of 96.3 % on fresh seeds 33-64 (seed 57: 87 % → 94 %);
+        the false charges rise by 1.3-1.6 points (mean per seed; per seed −4 to +5).
+        Without the bridge (every candidate kept): 66 % → 72 % false on six of those
+        seeds; 1 s instead of 0.5 s was as good (seeds 1-32).
     min_members, membership : social charges (:class:`socialcam.ChargeOptions`).
         ``membership`` defaults to the thesis' rule ``"all"`` (a ray may count for several
         charges): wearers' eyes are at one height, so nearly every two rays cross somewhere in
