@@ -220,3 +220,42 @@ def test_a_crossing_of_one_frame_is_no_charge():
     assert _find_charges(frames, times / 3, RunOptions())[3] == []
     with pytest.raises(ValueError, match="charge_persistence"):
         RunOptions(charge_persistence=-1)
+
+
+def test_a_pair_whose_eyes_stray_apart_keeps_its_charge():
+    # pair_bridge: two wearers look at one target; for 0.2 s their eyes are 2.5 h off the
+    # head's primary ray, one above, one below: the rays pass 5 h apart, the field has no
+    # joint mode there, but the target is within 3 h of both (Sec 3.1's cone)
+    from socialcam.charges import GazeRays, find_charges
+    from socialcam.pipeline import _find_charges
+
+    h = 0.02
+    eyes = np.array([[0.0, 0.0, 1.6], [3.0, 0.0, 1.6], [0.0, 3.0, 1.6]])
+    target = np.array([1.5, 2.0, 1.4])
+    u = (target - eyes) / np.linalg.norm(target - eyes, axis=1, keepdims=True)
+    wall = np.array([-1.0, 0.0, 0.0])  # wearer 2 looks at a wall
+
+    def frame(tilt):
+        look = u + np.outer([tilt, -tilt, 0.0], [0.0, 0.0, 1.0])
+        look[2] = wall
+        return GazeRays(eyes, look, h, normalize=True)
+
+    on, off = frame(0.0), frame(2.5 * h)
+    assert find_charges(off, member_sigma=3.0, membership="all") == []
+    frames = [on, on, on, off, off, on, on, on]
+    times = np.arange(len(frames)) / 10.0
+    kept = _find_charges(frames, times, RunOptions())
+    assert [len(cs) for cs in kept] == [1] * len(frames)
+    for cs in kept:
+        assert sorted(cs[0].members.tolist()) == [0, 1]
+        assert np.linalg.norm(cs[0].position - target) < 0.05
+    assert [len(cs) for cs in _find_charges(frames, times, RunOptions(pair_bridge=0))] == [
+        1, 1, 1, 0, 0, 1, 1, 1
+    ]  # fmt: skip
+    # a pair's candidate alone, with no mode of the pair before and after, is no charge:
+    # most such pairs are rays aimed at different things
+    (lone,) = find_charges(off, member_sigma=3.0, membership="all", pair_candidates=True)
+    assert lone.support == 0 and sorted(lone.members.tolist()) == [0, 1]
+    assert _find_charges([off] * 4, times[:4], RunOptions()) == [[]] * 4
+    with pytest.raises(ValueError, match="pair_bridge"):
+        RunOptions(pair_bridge=-0.1)

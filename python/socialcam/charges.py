@@ -217,7 +217,8 @@ class Charge:
     member_index : (K,) the same members as row indices into the frame's rays
     ids : (N,) person ids of all the frame's rays
     membership : (N,) membership feature (Eq 6.8): ``fᵢ(x)/‖f(x)‖`` over the frame's rays
-    support : how many mean-shift seeds converged here
+    support : how many mean-shift seeds converged here (0: no mode, e.g. a pair's
+        candidate, ``pair_candidates``)
     region_centre, region_axes, region_radii : the confidence region (where the field
         exceeds ``region_level`` (0.8) of ``magnitude``) as an ellipsoid: centre (3,),
         unit axes as the columns of (3, 3), semi-axes (3,) in metres
@@ -266,6 +267,16 @@ class ChargeOptions:
     pair_seeds : also seed at the near-intersection of every pair of rays passing within
         ``member_sigma`` bandwidths of each other (narrow bandwidths make basins shorter
         than the spacing of the stratified seeds)
+    pair_candidates : also a candidate charge (not a seed; ``support`` 0) at the
+        least-squares intersection (weights ``1/(s²h²)``) of every pair of rays within
+        ``member_sigma`` bandwidths of it that no mode (nor a closer pair's candidate)
+        holds as members: an extension of Sec 6.2 for two rays of one group each 1–3
+        bandwidths off their target on opposite sides, whose field has no joint mode. It
+        then passes the same membership rule as the modes. Most such pairs are rays aimed
+        at different things: see ``RunOptions.pair_bridge`` for how ``socialcam run``
+        keeps only those that bridge a group's modes over time
+    min_member_depth : a ray is no member of a candidate (mode or pair) closer than this
+        (metres) to its eye; a candidate left with fewer than ``min_members`` is rejected
     tol : a climb has converged when a step moves less than ``tol`` metres
     newton : Newton / over-relaxed steps where they raise the field (fast on elongated
         modes); ``False`` runs the plain update of Eq 6.7
@@ -339,6 +350,8 @@ class ChargeOptions:
     seeds_per_ray: int = 20
     depth_range: tuple[float, float] = (0.3, 10.0)
     pair_seeds: bool = True
+    pair_candidates: bool = False
+    min_member_depth: float = 0.0
     tol: float = 1e-5
     newton: bool = True
     max_iter: int = 100
@@ -367,13 +380,14 @@ class ChargeOptions:
         lo = check_float(dr[0], "depth_range", min=0.0, min_exclusive=True)
         hi = check_float(dr[1], "depth_range", min=lo)
         object.__setattr__(self, "depth_range", (lo, hi))
-        for name in ("pair_seeds", "newton", "joint_window"):
+        for name in ("pair_seeds", "pair_candidates", "newton", "joint_window"):
             if not isinstance(getattr(self, name), (bool, np.bool_)):
                 raise ValueError(f"{name}: expected True or False, got {getattr(self, name)!r}")
             object.__setattr__(self, name, bool(getattr(self, name)))
         check_float(self.tol, "tol", min=0.0, min_exclusive=True)
         check_int(self.max_iter, "max_iter", min=1)
         check_float(self.merge_radius, "merge_radius", min=0.0)
+        check_float(self.min_member_depth, "min_member_depth", min=0.0)
         check_float(self.member_sigma, "member_sigma", min=0.0, min_exclusive=True)
         check_int(self.min_members, "min_members", min=1)
         check_choice(self.membership, "membership", MEMBERSHIP_RULES)
@@ -397,7 +411,7 @@ class ChargeOptions:
         if self.region_level >= 1.0:
             raise ValueError(f"region_level: expected a number < 1, got {self.region_level}")
         check_float(self.region_max_radius, "region_max_radius", min=0.0, min_exclusive=True)
-        for name in ("tol", "merge_radius", "member_sigma", "charge_penalty", "unattended", "min_magnitude",
+        for name in ("tol", "merge_radius", "min_member_depth", "member_sigma", "charge_penalty", "unattended", "min_magnitude",
                      "drift", "switch_cost", "region_level", "region_max_radius"):  # fmt: skip
             object.__setattr__(self, name, float(getattr(self, name)))
         for name in ("seeds_per_ray", "max_iter", "min_members", "pool_frames"):

@@ -97,6 +97,10 @@ pub struct PyChargeOptions {
     #[pyo3(attribute)]
     pair_seeds: bool,
     #[pyo3(attribute)]
+    pair_candidates: bool,
+    #[pyo3(attribute)]
+    min_member_depth: f64,
+    #[pyo3(attribute)]
     tol: f64,
     #[pyo3(attribute)]
     newton: bool,
@@ -150,6 +154,8 @@ impl PyChargeOptions {
             depth_min: self.depth_range.0,
             depth_max: self.depth_range.1,
             pair_seeds: self.pair_seeds,
+            pair_candidates: self.pair_candidates,
+            min_member_depth: self.min_member_depth,
             tol: self.tol,
             newton: self.newton,
             max_iter: self.max_iter,

@@ -52,6 +52,23 @@ pub struct ModeOptions {
     /// rays only; with narrow bandwidths the stratified seeds then often miss a mode's
     /// basin, which is only about `member_sigma·h·depth / sin(angle)` long on each ray).
     pub pair_seeds: bool,
+    /// Also make a candidate charge (`support` 0) at the weighted closest approach of every
+    /// pair of rays that pass within `member_sigma` bandwidths of it (both, in front of
+    /// both eyes) and that no mode, nor a closer pair's candidate, already holds as
+    /// members (an extension of Sec 6.2, which takes only the modes). The field has a joint mode only where two rays pass within about two
+    /// bandwidths of each other; two rays of one group each 1–3 bandwidths off their
+    /// target on opposite sides (eyes off the head's primary direction: the cone of
+    /// Sec 3.1) leave one ridge along each ray and no mode, so no charge holds both,
+    /// although each is within `member_sigma` of the point (Eq 6.2's membership). The
+    /// candidate sits where Sec 6.2 would put a charge whose members are known: at their
+    /// least-squares intersection (weights `1/(s²h²)`). It then goes through the same
+    /// acceptance and membership rule as the modes.
+    pub pair_candidates: bool,
+    /// A ray is no member of a candidate charge (a mode or a pair's candidate) closer than
+    /// this (metres) to its eye; a candidate left with fewer than `min_members` is rejected
+    /// (every ray passes through its own eye, so any two rays "meet" right in front of one
+    /// of them). [`Membership::Partition`] then decides its members itself. `0`: no limit.
+    pub min_member_depth: f64,
     /// Charges whose field value is below this are rejected.
     pub min_magnitude: f64,
     /// Optional box `(lo, hi)` outside of which modes are rejected (for example a room).
@@ -102,6 +119,8 @@ impl Default for ModeOptions {
             charge_penalty: 2.0,
             unattended: 0.05,
             pair_seeds: true,
+            pair_candidates: false,
+            min_member_depth: 0.0,
             min_magnitude: 0.0,
             bounds: None,
             pool_frames: 10,
@@ -118,6 +137,10 @@ impl ModeOptions {
     /// Checks every setting, naming the first bad one.
     pub fn validate(&self) -> Result<()> {
         let bad = |arg: &str, msg: String| Err(Error::invalid(arg, msg));
+        if !(self.min_member_depth.is_finite() && self.min_member_depth >= 0.0) {
+            let msg = format!("{} must be finite and >= 0", self.min_member_depth);
+            return bad("min_member_depth", msg);
+        }
         if self.seeds_per_ray == 0 {
             return bad("seeds_per_ray", "must be at least 1".into());
         }
@@ -563,6 +586,9 @@ fn make_charge(
     let mut fi = Vec::with_capacity(n);
     for i in 0..n {
         fi.push(super::field::ray_density(rays, i, &x));
+        if (x - rays.p[i]).norm() < opts.min_member_depth {
+            continue;
+        }
         if let Some(d) = crate::geometry::perspective_distance(&rays.p[i], &rays.v[i], &x) {
             if d.norm() <= opts.member_sigma * rays.h[i] {
                 members.push(i);
@@ -706,8 +732,19 @@ fn charges_of_frame(
         .into_iter()
         .filter_map(|(x, value, support)| make_charge(rays, x, value, support, opts))
         .collect();
-    // Strongest first; exact ties broken by position so the order is total.
     let mut candidates = candidates;
+    if opts.pair_candidates {
+        // The closest pairs first; a pair that a candidate already holds has its charge.
+        for (i, j, x) in pair_candidates(rays, opts) {
+            let holds = |c: &Charge| c.members.contains(&i) && c.members.contains(&j);
+            if !candidates.iter().any(holds) {
+                let value = saliency(rays, &x);
+                // (`None`, or without the pair: near an eye, see `min_member_depth`)
+                candidates.extend(make_charge(rays, x, value, 0, opts).filter(holds));
+            }
+        }
+    }
+    // Strongest first; exact ties broken by position so the order is total.
     candidates.sort_by(|a, b| {
         b.magnitude
             .total_cmp(&a.magnitude)
@@ -762,6 +799,29 @@ fn charges_of_frame(
     Ok(charges)
 }
 
+/// The closest points `(pᵢ + vᵢsᵢ, pⱼ + vⱼsⱼ)` of rays `i` and `j` and their depths
+/// `(sᵢ, sⱼ)`, if the rays are not parallel and the points lie in front of both eyes.
+fn closest_approach(
+    rays: &GazeRays,
+    i: usize,
+    j: usize,
+) -> Option<(Vector3<f64>, Vector3<f64>, f64, f64)> {
+    let (pi, vi, pj, vj) = (&rays.p[i], &rays.v[i], &rays.p[j], &rays.v[j]);
+    let b = vi.dot(vj);
+    let denom = 1.0 - b * b;
+    if denom < 1e-12 {
+        return None; // parallel: no single closest point
+    }
+    let w0 = pi - pj;
+    let (d, e) = (vi.dot(&w0), vj.dot(&w0));
+    let si = (b * e - d) / denom;
+    let sj = (e - b * d) / denom;
+    if si <= 0.0 || sj <= 0.0 {
+        return None;
+    }
+    Some((pi + vi * si, pj + vj * sj, si, sj))
+}
+
 /// Seeds at the near-intersections of ray pairs ([`ModeOptions::pair_seeds`]): for every
 /// pair `i < j` of non-parallel rays, the midpoint of the shortest segment between the two
 /// lines, if it lies in front of both eyes and within `member_sigma` bandwidths of both.
@@ -771,26 +831,44 @@ fn pair_seeds(rays: &GazeRays, opts: &ModeOptions) -> Vec<Vector3<f64>> {
     let mut out = Vec::new();
     for i in 0..n {
         for j in i + 1..n {
-            let (pi, vi, pj, vj) = (&rays.p[i], &rays.v[i], &rays.p[j], &rays.v[j]);
-            let b = vi.dot(vj);
-            let denom = 1.0 - b * b;
-            if denom < 1e-12 {
-                continue; // parallel: no single closest point
-            }
-            let w0 = pi - pj;
-            let (d, e) = (vi.dot(&w0), vj.dot(&w0));
-            let si = (b * e - d) / denom;
-            let sj = (e - b * d) / denom;
-            if si <= 0.0 || sj <= 0.0 {
-                continue;
-            }
-            let x = (pi + vi * si + pj + vj * sj) * 0.5;
-            if q_of(rays, i, &x) <= m2 && q_of(rays, j, &x) <= m2 {
-                out.push(x);
+            if let Some((xi, xj, _, _)) = closest_approach(rays, i, j) {
+                let x = (xi + xj) * 0.5;
+                if q_of(rays, i, &x) <= m2 && q_of(rays, j, &x) <= m2 {
+                    out.push(x);
+                }
             }
         }
     }
     out
+}
+
+/// The candidates of [`ModeOptions::pair_candidates`]: for every pair `i < j`, the point
+/// of the shortest segment between the two rays that minimises `‖dᵢ/hᵢ‖² + ‖dⱼ/hⱼ‖²`
+/// (Eq 6.2; `‖d‖` is the distance over the depth `s`, so the weights are `1/(s²h²)`: the
+/// least-squares intersection of the pair), if it lies within `member_sigma` bandwidths
+/// of both rays.
+fn pair_candidates(rays: &GazeRays, opts: &ModeOptions) -> Vec<(usize, usize, Vector3<f64>)> {
+    let n = rays.len();
+    let m2 = opts.member_sigma * opts.member_sigma;
+    let mut out = Vec::new();
+    for i in 0..n {
+        for j in i + 1..n {
+            let Some((xi, xj, si, sj)) = closest_approach(rays, i, j) else {
+                continue;
+            };
+            let wi = rays.inv_h2[i] / (si * si);
+            let wj = rays.inv_h2[j] / (sj * sj);
+            // At xi + t(xj − xi) ray i is about t·g off and ray j (1 − t)·g.
+            let x = xi + (xj - xi) * (wj / (wi + wj));
+            let (qi, qj) = (q_of(rays, i, &x), q_of(rays, j, &x));
+            if qi <= m2 && qj <= m2 {
+                out.push((qi + qj, i, j, x));
+            }
+        }
+    }
+    // Closest first; ties in pair order, so the result never depends on scheduling.
+    out.sort_by(|a, b| a.0.total_cmp(&b.0));
+    out.into_iter().map(|(_, i, j, x)| (i, j, x)).collect()
 }
 
 /// `‖d/h‖²` of ray `i` at `x` (Eq 6.2), infinite behind the eye.
@@ -1297,6 +1375,52 @@ mod tests {
         let c = find_charges(&rays, &with_pairs, 0).unwrap();
         assert_eq!(c.len(), 1);
         assert!((c[0].position - t).norm() < 1e-4);
+    }
+
+    #[test]
+    fn pair_candidates_join_two_rays_off_target_on_opposite_sides() {
+        // Two wearers 2 m and 3 m from a target look at it with their eyes 2 h off the
+        // head's primary ray, one above it and one below: the rays pass 0.3 m apart, the
+        // field has one ridge along each ray and no joint mode, yet the target is within
+        // 2 h of both. The pair's candidate holds both, near the target.
+        let t = Vector3::new(0.0, 0.0, 1.5);
+        let h = 0.03;
+        let p = vec![Vector3::new(-2.0, 0.0, 1.5), Vector3::new(0.0, -3.0, 1.5)];
+        let off = |a: f64| -> Vec<Vector3<f64>> {
+            p.iter()
+                .zip([a, -a])
+                .map(|(p, a)| ((t - p).normalize() + Vector3::z() * a).normalize())
+                .collect()
+        };
+        let rays = GazeRays::new(p.clone(), off(2.0 * h), vec![h; 2], None).unwrap();
+        let modes = ModeOptions {
+            membership: Membership::All,
+            ..Default::default()
+        };
+        assert!(find_charges(&rays, &modes, 0).unwrap().is_empty());
+        let pairs = ModeOptions {
+            pair_candidates: true,
+            ..modes
+        };
+        let c = find_charges(&rays, &pairs, 0).unwrap();
+        assert_eq!(c.len(), 1, "{c:?}");
+        assert_eq!(c[0].members, vec![0, 1]);
+        assert!((c[0].position - t).norm() < 0.05, "{:?}", c[0].position);
+        // at the pair's least-squares intersection (the midpoint would be 6 cm off)
+        let x = super::super::partition::intersection(&rays, &[0, 1], &t).unwrap();
+        assert!(
+            (c[0].position - x).norm() < 1e-3,
+            "{:?} vs {x:?}",
+            c[0].position
+        );
+        // Rays that meet have their mode: no second charge for the same pair.
+        let exact = GazeRays::new(p.clone(), off(0.0), vec![h; 2], None).unwrap();
+        let c = find_charges(&exact, &pairs, 0).unwrap();
+        assert_eq!(c.len(), 1, "{c:?}");
+        assert!(c[0].support > 0 && (c[0].position - t).norm() < 1e-4);
+        // Rays 4 h off each are not within `member_sigma` (3) of any one point.
+        let far = GazeRays::new(p.clone(), off(4.0 * h), vec![h; 2], None).unwrap();
+        assert!(find_charges(&far, &pairs, 0).unwrap().is_empty());
     }
 
     #[test]
