@@ -4,7 +4,8 @@ person, 3D faces and their primary gaze rays (thesis Sec 3.2.2, Eq 3.2–3.4).
 - :func:`detect_faces` finds faces in frames (MTCNN through OpenCV's DNN module, the
   ``faces`` extra: ``pip install socialcam[faces]``): per face a box, a confidence and
   five landmarks (the eye centres, the nose tip, the mouth corners) with sub-pixel
-  coordinates, at full resolution, optionally upscaled tile by tile for small faces.
+  coordinates, at full resolution, optionally upscaled tile by tile for small faces, and
+  searched a second time stretched across for faces turned away from the camera.
 - :func:`reconstruct_faces` turns the detections of several calibrated cameras into 3D
   faces: wearers' faces are anchored to the projection of their own head camera, everyone
   else is grouped by the sequential RANSAC of Eq 3.2 (Rust core), landmarks are
