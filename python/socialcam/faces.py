@@ -716,6 +716,7 @@ def reconstruct_faces(
     """
     from socialcam import _core
     from socialcam._validate import apply_overrides
+    from socialcam.errors import DegenerateError
 
     o = apply_overrides(options, FaceOptions, overrides)
     if isinstance(detections, FaceDetections) or not isinstance(detections, Sequence):
@@ -925,12 +926,16 @@ def reconstruct_faces(
                 x0[:, p_, a] = np.interp(np.arange(t0, t1 + 1), tm, X[multi, p_, a])
         rows = np.nonzero(np.isin(group, gs))[0]
         step = g_inst[group[rows]] - t0
+        xr = None
         if lam > 0 and len(ts) > 1:
-            xr, sr = _core.face_refine_track(
-                K_, R_, C_, step.astype(np.int64), slot_[rows], lm_[rows], sigma[rows],
-                np.ascontiguousarray(x0), lam, int(o.refine_iterations), lam_shape=lam_s,
-            )  # fmt: skip
-        else:
+            try:
+                xr, sr = _core.face_refine_track(
+                    K_, R_, C_, step.astype(np.int64), slot_[rows], lm_[rows], sigma[rows],
+                    np.ascontiguousarray(x0), lam, int(o.refine_iterations), lam_shape=lam_s,
+                )  # fmt: skip
+            except DegenerateError:  # singular normal equations: keep Eq 3.3's landmarks
+                xr = None
+        if xr is None:
             xr, sr = x0, np.full(x0.shape[:2], np.nan)
             sr[ts - t0] = S[gs]
         L[ts, j] = xr[ts - t0]
