@@ -169,6 +169,38 @@ def test_rendered_faces_are_detected_where_the_truth_says(tmp_path):
     assert max(errs) < 0.12, errs
 
 
+def test_faces_turned_away_are_found_by_the_stretched_pass():
+    """Faces turned 70° from the camera (foreshortened across to a third): MTCNN on the
+    plain frame finds none of the four shipped faces, the second pass on the frame stretched
+    1.5× across finds all four (score ≥ 0.97), with landmarks mapped back onto the frame
+    (measured ≤ 0.07 of the box side from the projected truth)."""
+    imgs, marks = _person_faces(4)
+    K = np.array([[830.0, 0, 319.5], [0, 830.0, 239.5], [0, 0, 1]])
+    r = Renderer(K, 640, 480, [np.full((16, 16, 3), 90, np.uint8), *imgs])
+    from socialcam.synth.raster import face as plane
+
+    bg = plane("wall", [0, 0, 1.6], [1, 0, 0], 6.0, 4.0, 0)
+    plain, errs = 0, []
+    for k in range(4):
+        eye = np.array([0.5, 0.0, 1.6])
+        yaw = np.radians(70.0)
+        pl = _face_plane(eye, np.array([np.cos(yaw), np.sin(yaw), 0.0]))
+        pl = type(pl)(pl.name, pl.origin, pl.u, pl.v, pl.size, 1 + k)
+        C = eye + np.array([2.0, 0.0, 0.05])
+        R = look_at(C[None], eye)[0]
+        img = r.render(R, C, r.prepare([bg]), r.prepare([pl]))
+        plain += len(detect_faces(img, turned=None))
+        d = detect_faces(img)
+        assert len(d) == 1, f"face {k}: {len(d)} detections"
+        th, tw = imgs[k].shape[:2]
+        xy = marks[k]
+        X = pl.point((xy[:, 0] + 0.5) * pl.size[0] / tw, (xy[:, 1] + 0.5) * pl.size[1] / th)
+        uv, _ = _project(K, R, C, X)
+        errs.append(np.linalg.norm(d.landmarks[0] - uv, axis=1).max() / d.box[0, 3])
+    assert plain == 0
+    assert max(errs) < 0.12, errs
+
+
 def test_render_scene_face_truth(tmp_path):
     """Faces and people: truth shapes, visibility consistent with the image size, people
     rendered, determinism; the scene without faces is unchanged by the new code paths."""
@@ -351,8 +383,9 @@ def test_bad_input():
     assert f3.landmarks.shape == (4, 0, 5, 3) and f3.rays(0) is None
     # a face seen by one camera only is not reconstructed
     one = [w.dets[0], empty[1], empty[2]]
-    f1 = reconstruct_faces(one, w.cams)
-    assert (f1.detection_person[0] == -1).all() and f1.landmarks.shape[1] == 0
+    for sv in (False, True):
+        f1 = reconstruct_faces(one, w.cams, single_view=sv)
+        assert (f1.detection_person[0] == -1).all() and f1.landmarks.shape[1] == 0
     with pytest.raises(ValueError, match="cameras"):
         reconstruct_faces(w.dets, w.cams[:2])
     small = FaceDetections(e0.frame, e0.box, e0.confidence, e0.landmarks, 4, (320, 240))
@@ -367,6 +400,8 @@ def test_bad_input():
     with pytest.raises(ValueError, match="frames"):
         detect_faces(np.zeros((4, 4), np.uint8))
     assert len(detect_faces(np.zeros((64, 64, 3), np.uint8))) == 0
+    with pytest.raises(ValueError, match="turned"):
+        detect_faces(np.zeros((64, 64, 3), np.uint8), turned=0.5)
     # the core refuses two detections of one camera in one group
     K = np.tile(np.eye(3), (2, 1, 1))
     K[:, :2, 2] = 100

@@ -14,7 +14,12 @@ import numpy as np
 import pytest
 from scipy.spatial.transform import Rotation
 
-from socialcam.faces import _tridiagonal_marginals, fuse_ego_exo, reconstruct_faces
+from socialcam.faces import (
+    _shape_covariance,
+    _tridiagonal_marginals,
+    fuse_ego_exo,
+    reconstruct_faces,
+)
 from socialcam.synth.evaluate import (
     ego_exo_disagreement,
     face_joint_attention,
@@ -33,7 +38,8 @@ def scene(tmp_path_factory):
     dets, cams = truth_detections(truth, scale=8.0, seed=1)
     f3 = reconstruct_faces(dets, cams)
     scaled = dataclasses.replace(truth, K=np.stack([c.K[0] for c in cams]))
-    return truth, f3, faces_vs_truth(scaled, dets, f3)
+    one = reconstruct_faces(dets, cams, single_view=True)
+    return truth, f3, faces_vs_truth(scaled, dets, f3), (one, faces_vs_truth(scaled, dets, one))
 
 
 def _truth_rays(truth, bias_deg: float = 0.0):
@@ -58,7 +64,7 @@ def test_joint_attention_scorer_against_truth_rays(scene):
     (measured 0.062 vs 0.058 m; circle seed 2 0.054 vs 0.047); the same rays turned 3° / 5°
     score 2× / 3.4× worse (0.117 / 0.201 m): how little face-direction error joint
     attention tolerates."""
-    truth, _f3, _r = scene
+    truth, _f3, _r, _one = scene
     owner = {j: j for j in range(truth.face_normal[0].shape[1])}
     exact = face_joint_attention(truth, _truth_rays(truth), owner)
     # groups count once their members have looked at the head for 0.6 s: 34 groups, the
@@ -77,7 +83,7 @@ def test_exo_joint_attention_and_ego_exo_fusion(scene):
     0.23 / 0.65 with exo error 0.20 / 0.36 / 0.36 / 0.26 m (ego rays on the same groups
     0.056 m: the issue's 1.5× is not met, see ``benches/faces_accuracy.out.txt``); ego/exo
     disagreement of the wearers 1.9 / 5.4 / 5.8 / 3.1° median."""
-    truth, f3, r = scene
+    truth, f3, r, _one = scene
     assert r["association"] >= 0.98 and r["face_instants"] >= 150, r
     assert r["gaze_deg"] < 2.6, r["gaze_deg"]
     ja = face_joint_attention(truth, f3, r["owner"])
@@ -103,7 +109,7 @@ def test_h_reflects_the_face_direction_error(scene):
     rotation ties: the gaze error over σ = √(h² − eye_in_head²) has the median of a 2-D
     Gaussian's angle (1.18); measured 1.26 (seeds 2, 3: 1.40, 1.54). With each instant's
     own covariance (ties ignored) σ was 2.6× too large (0.50; 0.66, 0.69)."""
-    _truth, f3, r = scene
+    _truth, f3, r, _one = scene
     sig = np.concatenate(
         [np.sqrt(f3.h[np.isfinite(f3.v[:, j, 0]), j] ** 2 - 0.05**2) for j in r["owner"]]
     )
@@ -127,3 +133,81 @@ def test_tridiagonal_marginals_match_the_dense_inverse():
     got = _tridiagonal_marginals(A, w)
     for i in range(n):
         np.testing.assert_allclose(got[i], inv[6 * i : 6 * i + 6, 6 * i : 6 * i + 6], atol=1e-12)
+
+
+def test_shape_covariance_is_the_joint_inverses_extra_term():
+    """The rotation covariance of a rigid face with its shape unknown too: the diagonal
+    blocks of the joint (poses + shape) inverse equal the poses' own marginals plus the
+    shape's share from ``_shape_covariance`` (the shape's gauge fixed the same way)."""
+    rng = np.random.default_rng(1)
+    n, rows = 5, 9
+    step = np.r_[np.arange(n), rng.integers(0, n, rows - n)]
+    Jp = rng.normal(size=(rows, 10, 6))
+    Js = rng.normal(size=(rows, 10, 15))
+    S = rng.normal(size=(5, 3))
+    S -= S.mean(0)
+    ties = rng.uniform(0.5, 2.0, (n - 1, 6))
+    A = np.zeros((n, 6, 6))
+    np.add.at(A, step, np.einsum("rka,rkb->rab", Jp, Jp))
+    F = np.zeros((6 * n + 15, 6 * n + 15))
+    for i in range(n):
+        F[6 * i : 6 * i + 6, 6 * i : 6 * i + 6] = A[i] + np.diag(
+            (ties[i] if i < n - 1 else 0) + (ties[i - 1] if i else 0)
+        )
+    for i in range(n - 1):
+        for a in range(6):
+            F[6 * i + a, 6 * i + 6 + a] = F[6 * i + 6 + a, 6 * i + a] = -ties[i, a]
+    Hp = F[: 6 * n, : 6 * n].copy()
+    ab = np.zeros((12, 6 * n))  # upper banded form (bandwidth 11)
+    for d in range(12):
+        ab[11 - d, d:] = np.diagonal(Hp, d)
+    for r in range(rows):
+        F[6 * step[r] : 6 * step[r] + 6, 6 * n :] += Jp[r].T @ Js[r]
+    F[6 * n :, : 6 * n] = F[: 6 * n, 6 * n :].T
+    G = np.zeros((15, 6))
+    for a in range(3):
+        G[a::3, a] = 1.0
+        G[:, 3 + a] = np.cross(np.eye(3)[a], S).reshape(-1)
+    G /= np.linalg.norm(G, axis=0)
+    Hss = np.einsum("rka,rkb->ab", Js, Js)
+    F[6 * n :, 6 * n :] = Hss + 1e6 * np.trace(Hss) * G @ G.T
+    joint = np.linalg.inv(F)
+    own = _tridiagonal_marginals(Hp.reshape(n, 6, n, 6)[np.arange(n), :, np.arange(n)], ties)
+    extra = _shape_covariance(ab, Jp, Js, step, S)
+    for i in range(n):
+        want = joint[6 * i : 6 * i + 3, 6 * i : 6 * i + 3] - own[i, :3, :3]
+        np.testing.assert_allclose(extra[i], want, rtol=1e-5, atol=1e-9)
+    assert np.trace(extra, axis1=1, axis2=2).min() > 0
+
+
+def test_faces_seen_by_one_camera_join_their_tracks(scene):
+    """``single_view``: a tracked face seen by one camera at an instant gets a ray there,
+    placed by the track (measured on this scene: face-instants 185 → 272, median gaze error
+    2.10 → 2.54°, association 0.998 either way, no false detection), and its σ says it is
+    less sure than the instants seen by several cameras (2.3 vs 1.7° median). Their depth
+    comes from the position ties: landmarks 23 mm off median (68 mm without the ties; 3 mm
+    where several cameras see the face)."""
+    _truth, f3, r, (one, r1) = scene
+    assert r1["association"] >= 0.98 and r1["false_surviving"] == 0, r1
+    assert r1["face_instants"] > 1.3 * r["face_instants"], (r1["face_instants"], r["face_instants"])
+    assert not (np.isfinite(f3.v[..., 0]) & (f3.views < 2)).any()  # off by default
+    single = np.isfinite(one.v[..., 0]) & (one.views == 1)
+    multi = np.isfinite(one.v[..., 0]) & (one.views >= 2)
+    sig = np.sqrt(np.maximum(one.h**2 - 0.05**2, 0.0))
+    assert np.median(sig[single]) > 1.2 * np.median(sig[multi])
+    assert r1["gaze_deg"] < 1.5 * r["gaze_deg"], (r1["gaze_deg"], r["gaze_deg"])
+    views = np.concatenate(
+        [one.views[np.isfinite(one.landmarks[:, j, 0, 0]), j] for j in r1["owner"]]
+    )
+    assert np.median(r1["landmark_errors_m"][views == 1]) < 0.04
+
+
+def test_ransac_only_association_does_not_crash(scene):
+    """Without the wearers' anchors every face goes through RANSAC; on this circle a track
+    then gathers detections whose Eq 3.4 normal equations are singular (a DegenerateError
+    from the core on main before): the track keeps its Eq 3.3 landmarks instead. (RANSAC
+    alone cannot tell the people of this circle apart, see STACK: association 0.79 here.)"""
+    truth = scene[0]
+    dets, cams = truth_detections(truth, scale=8.0, seed=1)
+    f3 = reconstruct_faces(dets, cams, anchors=False)
+    assert f3.landmarks.shape[1] > 0 and np.isfinite(f3.v[..., 0]).sum() > 100

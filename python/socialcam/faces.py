@@ -4,7 +4,8 @@ person, 3D faces and their primary gaze rays (thesis Sec 3.2.2, Eq 3.2–3.4).
 - :func:`detect_faces` finds faces in frames (MTCNN through OpenCV's DNN module, the
   ``faces`` extra: ``pip install socialcam[faces]``): per face a box, a confidence and
   five landmarks (the eye centres, the nose tip, the mouth corners) with sub-pixel
-  coordinates, at full resolution, optionally upscaled tile by tile for small faces.
+  coordinates, at full resolution, optionally upscaled tile by tile for small faces, and
+  searched a second time stretched across for faces turned away from the camera.
 - :func:`reconstruct_faces` turns the detections of several calibrated cameras into 3D
   faces: wearers' faces are anchored to the projection of their own head camera, everyone
   else is grouped by the sequential RANSAC of Eq 3.2 (Rust core), landmarks are
@@ -151,41 +152,49 @@ def _nms(boxes: FloatArray, thr: float) -> list[int]:
 
 
 def _detect_one(
-    det: Any, img: U8Image, upscale: float, tile: int, min_confidence: float
+    det: Any,
+    img: U8Image,
+    upscale: float,
+    tile: int,
+    min_confidence: float,
+    turned: float | None = None,
 ) -> tuple[FloatArray, FloatArray]:
     """Faces in one image, upscaled by ``upscale`` and cut into overlapping tiles of at
-    most ``tile`` pixels (after upscaling) when it is larger."""
+    most ``tile`` pixels (after upscaling) when it is larger; with ``turned``, searched a
+    second time stretched horizontally by that factor (faces turned away from the camera,
+    foreshortened across), the two passes merged by non-maximum suppression."""
     import cv2
 
     h, w = img.shape[:2]
-    big: Any = img
-    if upscale != 1.0:
-        big = cv2.resize(
-            img, (round(w * upscale), round(h * upscale)), interpolation=cv2.INTER_CUBIC
-        )
-    H, W = big.shape[:2]
-    overlap = max(64, tile // 4)
     boxes_l, lms_l = [], []
-    ys = [0] if H <= tile else list(range(0, H - overlap, tile - overlap))
-    xs = [0] if W <= tile else list(range(0, W - overlap, tile - overlap))
-    for y0 in ys:
-        for x0 in xs:
-            y1, x1 = min(H, y0 + tile), min(W, x0 + tile)
-            b, lm = _mtcnn(det, np.ascontiguousarray(big[y0:y1, x0:x1]))
-            if len(b):
-                b[:, [0, 2]] += x0
-                b[:, [1, 3]] += y0
-                lm = lm + np.array([x0, y0])
-                boxes_l.append(b)
-                lms_l.append(lm)
+    searched = 0
+    for sx in (1.0,) if turned is None else (1.0, turned):
+        big: Any = img
+        if upscale != 1.0 or sx != 1.0:
+            big = cv2.resize(
+                img,
+                (round(w * upscale * sx), round(h * upscale)),
+                interpolation=cv2.INTER_CUBIC,
+            )
+        H, W = big.shape[:2]
+        overlap = max(64, tile // 4)
+        ys = [0] if H <= tile else list(range(0, H - overlap, tile - overlap))
+        xs = [0] if W <= tile else list(range(0, W - overlap, tile - overlap))
+        scale = np.array([upscale * sx, upscale])
+        for y0 in ys:
+            for x0 in xs:
+                y1, x1 = min(H, y0 + tile), min(W, x0 + tile)
+                b, lm = _mtcnn(det, np.ascontiguousarray(big[y0:y1, x0:x1]))
+                searched += 1
+                if len(b):  # back to the original pixel grid (centre convention)
+                    b[:, :4] = (b[:, :4] + np.r_[x0, y0, x0, y0] + 0.5) / np.tile(scale, 2) - 0.5
+                    boxes_l.append(b)
+                    lms_l.append((lm + np.array([x0, y0]) + 0.5) / scale - 0.5)
     if not boxes_l:
         return np.zeros((0, 5)), np.zeros((0, 5, 2))
     boxes, lms = np.concatenate(boxes_l), np.concatenate(lms_l)
-    keep = _nms(boxes, 0.5) if len(xs) * len(ys) > 1 else list(range(len(boxes)))
+    keep = _nms(boxes, 0.5) if searched > 1 else list(range(len(boxes)))
     boxes, lms = boxes[keep], lms[keep]
-    if upscale != 1.0:  # back to the original pixel grid (centre convention)
-        boxes[:, :4] = (boxes[:, :4] + 0.5) / upscale - 0.5
-        lms = (lms + 0.5) / upscale - 0.5
     ok = boxes[:, 4] >= min_confidence
     return boxes[ok], lms[ok]
 
@@ -222,6 +231,7 @@ def detect_faces(
     min_confidence: float = 0.9,
     upscale: float = 1.0,
     tile: int = 2048,
+    turned: float | None = 1.5,
     progress: bool = False,
     desc: str = "faces",
 ) -> FaceDetections:
@@ -235,6 +245,11 @@ def detect_faces(
     min_confidence : detections scoring less are dropped
     upscale : enlarge each frame by this factor before detection (≥ 1; 2 finds faces of
         ≈ 6 px), processed in tiles of ``tile`` pixels so the memory stays bounded
+    turned : also search every frame stretched horizontally by this factor (``None`` =
+        not): a face turned away from the camera by 60–75° is foreshortened across, and
+        MTCNN's networks, trained on near-frontal faces, then miss most of them (measured on
+        rendered walking scenes at 1280×960: 23 % found of the faces turned 60–75°, 96–100 %
+        below 60°). The second pass costs about 1.5× the first
     progress : show a progress bar
 
     Returns
@@ -246,6 +261,7 @@ def detect_faces(
     mc = check_float(min_confidence, "min_confidence", min=0.0, max=1.0)
     up = check_float(upscale, "upscale", min=1.0, max=8.0)
     tl = check_int(tile, "tile", min=128, max=16384)
+    tn = None if turned is None else check_float(turned, "turned", min=1.0, max=4.0)
     images, total = _frames_of(frames)
     det = _detector(mf * up)
     bar = None
@@ -271,7 +287,7 @@ def detect_faces(
                     f"frames: frame {k} is {s[0]}×{s[1]} but frame 0 is {size[0]}×{size[1]}; "
                     "one camera's frames must share one size"
                 )
-            b, lms = _detect_one(det, a, up, tl, mc)
+            b, lms = _detect_one(det, a, up, tl, mc, tn)
             fr.append(np.full(len(b), k, np.int64))
             bx.append(b)
             lm.append(lms)
@@ -356,6 +372,15 @@ class FaceOptions:
         conversation circles turn by 0.6° per frame (median, 10 fps: 0.1 rad/s) between
         jumps to a new speaker; measured on circles seeds 1–12 (6 wearers + 3 people, 10 s,
         detector-like landmarks), median gaze 2.30 / 2.23 / 2.55° at 0.05 / 0.1 / 0.25 rad/s
+    single_view : a tracked face (a wearer's, or a track's) seen by ONE camera at an
+        instant within ``max_gap`` instants of its multi-view span joins the track there:
+        Eq 3.4 and the rigid face place it (the position tied over time at ``smoothness``,
+        the rotation by ``rigid_turn_rate``), and it gets a ray whose ``h`` comes from the
+        same marginal covariance. Off by default: on the rendered circles (whose faces are
+        flat photographs, so one view hardly tells a face's yaw) it raised the face-instants
+        by 50–65 % but those rays err by 3–6° median even while the head holds still (σ says
+        2.6–2.9°), and joint attention got no better (seeds 1–6: exo/ego median 2.18 with,
+        2.06 without). Real faces, with a nose and a depth, tell their yaw from one view
     """
 
     rel_threshold: float = 0.1
@@ -374,6 +399,7 @@ class FaceOptions:
     sync_tolerance: float | None = None
     rigid: bool = True
     rigid_turn_rate: float | None = 0.1
+    single_view: bool = False
 
     def __post_init__(self) -> None:
         for name in (
@@ -469,12 +495,17 @@ def _kabsch(A: FloatArray, B: FloatArray) -> tuple[FloatArray, FloatArray]:
 
 def _tridiagonal_marginals(A: FloatArray, w: FloatArray) -> FloatArray:
     """Diagonal blocks ``(n, 6, 6)`` of the inverse of the symmetric block-tridiagonal
-    matrix with diagonal blocks ``A (n, 6, 6)`` and off-diagonal blocks ``−w_i`` on the
-    first three axes (the rotation ties ``w (n − 1,)``), by forward Schur complements and
-    the backward recursion: linear in ``n``."""
+    matrix with diagonal blocks ``A (n, 6, 6)`` and diagonal off-diagonal blocks
+    ``−diag(w_i)``: ties per axis ``w (n − 1, 6)``, or ``(n − 1,)`` on the first three
+    axes only (the rotation ties), by forward Schur complements and the backward
+    recursion: linear in ``n``."""
     n = len(A)
-    B = np.zeros((n - 1, 6, 6))
-    B[:, :3, :3] = -w[:, None, None] * np.eye(3)
+    w6 = np.zeros((n - 1, 6))
+    if w.ndim == 1:
+        w6[:, :3] = w[:, None]
+    else:
+        w6[:] = w
+    B = -w6[:, :, None] * np.eye(6)
     Dinv = np.empty_like(A)
     D = A[0]
     for i in range(n):
@@ -503,13 +534,19 @@ def _rigid_track(
     turn_rate: float | None = None,
     iterations: int = 5,
     shape: bool = True,
+    centre_rate: float | None = None,
 ) -> tuple[FloatArray, FloatArray]:
     """One rigid face per track: the shape is the weighted Procrustes mean of the track's
     landmarks ``X (n, 5, 3)`` (the observed instants ``0..n-1``), and every instant gets the
     rotation and position of that shape that best reprojects onto its detections (Gauss–
     Newton on the reprojection error in units of ``sigma``). Returns the landmarks
     ``(n, 5, 3)`` and, per instant, the covariance ``(n, 3, 3)`` of the rotation (radians²,
-    world axes)."""
+    world axes). With ``turn_rate``, ``centre_rate`` (m/s) also ties the positions of
+    consecutive instants (plain least squares): what fixes the depth of an instant seen by
+    one camera (weight 0 in ``weight``, its ``X`` only a starting point). The rotation
+    covariance includes the uncertainty of the shape (which decides how one view turns a
+    face: a shape a little too deep or too flat turns it by much more than the landmark
+    noise alone says)."""
     n = len(X)
     # generalised Procrustes: align every instant to the mean shape, average, repeat
     S = X[int(np.argmax(weight))] - X[int(np.argmax(weight))].mean(0)
@@ -519,6 +556,11 @@ def _rigid_track(
         S = np.einsum("n,npi->pi", weight, local) / weight.sum()
         S -= S.mean(0)
     Rt, c = _kabsch(S, X)
+    if (weight <= 0).any() and (weight > 0).any():  # instants of one view start turned as
+        ref = np.nonzero(weight > 0)[0]  # the nearest instant of several views
+        t_ = np.arange(n) if times is None else times
+        near = ref[np.argmin(np.abs(t_[:, None] - t_[ref][None]), axis=1)]
+        Rt = Rt[near]
 
     def residual(Rt_: FloatArray, c_: FloatArray, S: FloatArray = S) -> FloatArray:
         Xw = np.einsum("nij,pj->npi", Rt_, S) + c_[:, None]  # (n, 5, 3)
@@ -557,26 +599,31 @@ def _rigid_track(
             # that scatter would cut nearly every tie (measured on rendered circles, seeds
             # 1-12: gaze 2.9 → 2.2° median with the quadratic start)
             w = lam if it == 0 else lam / (1.0 + lam * np.einsum("ni,ni->n", e, e))
+            ties = np.zeros((n - 1, 6))
+            ties[:, :3] = w[:, None]
+            e6 = np.c_[e, c[1:] - c[:-1]]
+            if centre_rate is not None:
+                ties[:, 3:] = (1.0 / (centre_rate * np.maximum(np.diff(times), 1e-6)) ** 2)[:, None]
             # block-tridiagonal normal matrix in the upper banded form of solveh_banded
             ab = np.zeros((12, 6 * n))
             gd = g.copy()
             Hb = H.copy()
-            Hb[:-1, :3, :3] += w[:, None, None] * np.eye(3)
-            Hb[1:, :3, :3] += w[:, None, None] * np.eye(3)
-            gd[1:, :3] += w[:, None] * e
-            gd[:-1, :3] -= w[:, None] * e
+            Hb[:-1] += ties[:, :, None] * np.eye(6)
+            Hb[1:] += ties[:, :, None] * np.eye(6)
+            gd[1:] += ties * e6
+            gd[:-1] -= ties * e6
             for i in range(6):
                 for j in range(i, 6):
                     ab[11 + i - j, j::6] = Hb[:, i, j]
-            for i in range(3):
-                ab[11 - 6, 6 + i :: 6][: n - 1] = -w
+            for i in range(6):
+                ab[11 - 6, 6 + i :: 6][: n - 1] = -ties[:, i]
             dx = -solveh_banded(ab, gd.reshape(-1)).reshape(n, 6)
         Rt = _rotvec(np.asarray(dx[:, :3], np.float64)) @ Rt
         c = c + dx[:, 3:]
         if turn_rate is None or times is None or n < 2:
             cov = np.linalg.inv(H)[:, :3, :3]
         else:  # each instant's marginal covariance under the ties (what the track knows)
-            cov = _tridiagonal_marginals(Hb, w)[:, :3, :3]
+            cov = _tridiagonal_marginals(Hb, ties)[:, :3, :3]
         if shape:  # one Gauss–Newton step on the shape shared by all instants
             rs = residual(Rt, c, S).reshape(-1)
             Js = np.empty((len(rs), 15))
@@ -584,9 +631,41 @@ def _rigid_track(
                 ds = np.zeros(15)
                 ds[a] = eps
                 Js[:, a] = (residual(Rt, c, S + ds.reshape(5, 3)).reshape(-1) - rs) / eps
+            if it == iterations - 1 and turn_rate is not None and times is not None and n > 1:
+                cov = cov + _shape_covariance(ab, J, Js.reshape(len(slot), 10, 15), step, S)
             step_s = np.linalg.solve(Js.T @ Js + 1e-6 * np.eye(15), Js.T @ rs)
             S = S - step_s.reshape(5, 3)
     return np.einsum("nij,pj->npi", Rt, S) + c[:, None], cov
+
+
+def _shape_covariance(
+    ab: FloatArray, Jp: FloatArray, Js: FloatArray, step: IntArray, S: FloatArray
+) -> FloatArray:
+    """The part of each instant's rotation covariance ``(n, 3, 3)`` that comes from the
+    uncertainty of the shared shape: with the pose normal matrix ``A`` (banded ``ab``, the
+    ties included), the pose–shape coupling ``B`` (from the pose Jacobians ``Jp (rows, 10,
+    6)`` and shape Jacobians ``Js (rows, 10, 15)``) and the shape's Schur complement
+    ``Σ_s = (H_ss − Bᵀ A⁻¹ B)⁻¹``, the term ``(A⁻¹ B)_i Σ_s (A⁻¹ B)_iᵀ`` of the joint
+    inverse. The shape's gauge (moving or turning it with all poses) is fixed."""
+    from scipy.linalg import solveh_banded  # type: ignore[import-untyped,unused-ignore]
+
+    n = ab.shape[1] // 6
+    B = np.zeros((n, 6, 15))
+    np.add.at(B, step, np.einsum("rka,rkb->rab", Jp, Js))
+    Hss = np.einsum("rka,rkb->ab", Js, Js)
+    # gauge: shifts and infinitesimal turns of the (centred) shape
+    G = np.zeros((15, 6))
+    for a in range(3):
+        G[a::3, a] = 1.0
+        w = np.zeros(3)
+        w[a] = 1.0
+        G[:, 3 + a] = np.cross(w, S).reshape(-1)
+    G /= np.maximum(np.linalg.norm(G, axis=0), 1e-12)
+    Hss = Hss + 1e6 * np.trace(Hss) * G @ G.T
+    AiB = solveh_banded(ab, B.reshape(6 * n, 15)).reshape(n, 6, 15)
+    M = Hss - np.einsum("nai,naj->ij", B, AiB)
+    Ss = np.linalg.pinv(0.5 * (M + M.T), hermitian=True)
+    return np.einsum("nai,ij,nbj->nab", AiB[:, :3], Ss, AiB[:, :3])
 
 
 def _instants(cams: Sequence[Any], tol: float | None) -> tuple[FloatArray, list[IntArray]]:
@@ -637,6 +716,7 @@ def reconstruct_faces(
     """
     from socialcam import _core
     from socialcam._validate import apply_overrides
+    from socialcam.errors import DegenerateError
 
     o = apply_overrides(options, FaceOptions, overrides)
     if isinstance(detections, FaceDetections) or not isinstance(detections, Sequence):
@@ -763,9 +843,23 @@ def reconstruct_faces(
             cams_t[0], cams_t[1], cams_t[2], local[slot_[rows_t]], lm_[rows_t], sigma[rows_t], grp
         )
         claimed: set[int] = set()
-        order = sorted(range(len(g_anchor)), key=lambda g: g_anchor[g] < 0)  # anchored first
+        # faces seen by several cameras first (anchored before RANSAC groups), then the
+        # anchored faces seen by one camera
+        order = sorted(range(len(g_anchor)), key=lambda g: (nviews[g] < 2, g_anchor[g] < 0))
         for g in order:
             if nviews[g] < 2:
+                if not (o.single_view and g_anchor[g] >= 0 and (grp == g).sum() == 1):
+                    continue
+                pid = a_who[g_anchor[g]]
+                if pid in claimed:
+                    continue
+                claimed.add(pid)
+                group[rows_t[grp == g]] = len(g_inst_l)
+                g_inst_l.append(int(t))
+                g_person_l.append(pid)
+                Xl.append(np.full((5, 3), np.nan))
+                Sl.append(np.full(5, np.nan))
+                nv_l.append(1)
                 continue
             eye = 0.5 * (X[g, 0] + X[g, 1])
             if g_anchor[g] >= 0:
@@ -799,7 +893,7 @@ def reconstruct_faces(
     X = np.array(Xl).reshape(-1, 5, 3)
     S = np.array(Sl).reshape(-1, 5)
     nviews = np.array(nv_l, np.int64)
-    persons = np.unique(g_person[g_person >= 0])
+    persons = np.unique(g_person[(g_person >= 0) & (nviews >= 2)])
     J = len(persons)
     col = {int(p): j for j, p in enumerate(persons)}
     L = np.full((T, J, 5, 3), np.nan)
@@ -816,21 +910,32 @@ def reconstruct_faces(
     for pid in persons:
         j = col[int(pid)]
         gs = np.nonzero(g_person == pid)[0]
+        multi = gs[nviews[gs] >= 2]
+        tm = g_inst[multi]
+        # instants seen by one camera join the track within max_gap of its multi-view span
+        near = (g_inst[gs] >= tm.min() - o.max_gap) & (g_inst[gs] <= tm.max() + o.max_gap)
+        near &= (nviews[gs] >= 2) | (lam > 0)  # one view needs the temporal terms
+        group[np.isin(group, gs[~near])] = -1
+        gs = gs[near]
         ts = g_inst[gs]
         # Eq 3.4 over the span of the track (gaps filled by the smoothness term)
         t0, t1 = int(ts.min()), int(ts.max())
         x0 = np.empty((t1 - t0 + 1, 5, 3))
         for p_ in range(5):
             for a in range(3):
-                x0[:, p_, a] = np.interp(np.arange(t0, t1 + 1), ts, X[gs, p_, a])
+                x0[:, p_, a] = np.interp(np.arange(t0, t1 + 1), tm, X[multi, p_, a])
         rows = np.nonzero(np.isin(group, gs))[0]
         step = g_inst[group[rows]] - t0
+        xr = None
         if lam > 0 and len(ts) > 1:
-            xr, sr = _core.face_refine_track(
-                K_, R_, C_, step.astype(np.int64), slot_[rows], lm_[rows], sigma[rows],
-                np.ascontiguousarray(x0), lam, int(o.refine_iterations), lam_shape=lam_s,
-            )  # fmt: skip
-        else:
+            try:
+                xr, sr = _core.face_refine_track(
+                    K_, R_, C_, step.astype(np.int64), slot_[rows], lm_[rows], sigma[rows],
+                    np.ascontiguousarray(x0), lam, int(o.refine_iterations), lam_shape=lam_s,
+                )  # fmt: skip
+            except DegenerateError:  # singular normal equations: keep Eq 3.3's landmarks
+                xr = None
+        if xr is None:
             xr, sr = x0, np.full(x0.shape[:2], np.nan)
             sr[ts - t0] = S[gs]
         L[ts, j] = xr[ts - t0]
@@ -839,7 +944,8 @@ def reconstruct_faces(
             at = np.searchsorted(ts - t0, step)
             L[ts, j], cov = _rigid_track(
                 K_, R_, C_, at, slot_[rows], lm_[rows], sigma[rows], xr[ts - t0],
-                nviews[gs].astype(np.float64), times[ts], o.rigid_turn_rate,
+                np.where(nviews[gs] >= 2, nviews[gs], 0).astype(np.float64), times[ts],
+                o.rigid_turn_rate, centre_rate=o.smoothness if o.smoothness > 0 else None,
             )  # fmt: skip
             n0 = np.cross(
                 L[ts, j, 1] - L[ts, j, 0], L[ts, j, 3] + L[ts, j, 4] - L[ts, j, 0] - L[ts, j, 1]
@@ -851,7 +957,7 @@ def reconstruct_faces(
     # detections → person column
     for r in range(len(group)):
         g = group[r]
-        if g >= 0 and g_person[g] >= 0:
+        if g >= 0 and int(g_person[g]) in col:  # people seen by one camera only: −1
             det_person[cam_of[r]][idx_of[r]] = col[int(g_person[g])]
     flatL = L.reshape(-1, 5, 3)
     p, vv, sg = _core.face_gaze(
