@@ -21,6 +21,10 @@ walk) and 131_02 frames 850–1149 (walking to a stop), every offset. motion_wei
 chosen on those three sets (all seen before). Fresh (session 6, held out until the method
 was fixed): CMU 131_01 frames 750–993 (to a stop), 131_02 frames 200–499 (starting to
 walk), every offset, and 85_02 frames 300–779 (offsets 300, 390, 480, 570, 660).
+Unseen (session 7, measured once at the end): CMU 131_01 frames 0–149 and 131_02 frames
+0–199 (standing, then the first steps). "robust" also refines the selected start again
+with the DCT basis grown to the motion (refine_k_max, size by BIC); "robust-k8" is session
+6's method (refine_k_max=0).
 Run: python benches/articulated_accuracy.py [--quick | --full] [--parts dev,fresh,...]
 """
 
