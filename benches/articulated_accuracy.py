@@ -21,6 +21,10 @@ walk) and 131_02 frames 850–1149 (walking to a stop), every offset. motion_wei
 chosen on those three sets (all seen before). Fresh (session 6, held out until the method
 was fixed): CMU 131_01 frames 750–993 (to a stop), 131_02 frames 200–499 (starting to
 walk), every offset, and 85_02 frames 300–779 (offsets 300, 390, 480, 570, 660).
+Unseen (session 7, measured once at the end): CMU 131_01 frames 0–149 and 131_02 frames
+0–199 (standing, then the first steps). "robust" also refines the selected start again
+with the DCT basis grown to the motion (refine_k_max, size by BIC); "robust-k8" is session
+6's method (refine_k_max=0).
 Run: python benches/articulated_accuracy.py [--quick | --full] [--parts dev,fresh,...]
 """
 
@@ -130,11 +134,18 @@ def run(
 
 METHOD_OPTIONS: dict[str, dict] = {
     "thesis": {"method": "thesis"},
-    "robust-mincost": {"method": "robust", "smooth_weight": 0.0, "motion_weight": 0.0},
-    "robust-smooth": {"method": "robust", "motion_weight": 0.0},
+    "robust-mincost": {
+        "method": "robust",
+        "smooth_weight": 0.0,
+        "motion_weight": 0.0,
+        "refine_k_max": 0,
+    },
+    "robust-smooth": {"method": "robust", "motion_weight": 0.0, "refine_k_max": 0},
+    "robust-k8": {"method": "robust", "refine_k_max": 0},
     "robust": {"method": "robust"},
 }
-PARTS = ("dev", "held-out", "new", "fresh")
+FULL_ONLY = ("robust-mincost", "robust-smooth")
+PARTS = ("dev", "held-out", "new", "fresh", "unseen")
 FRESH_C3D_OFFSETS = (300, 390, 480, 570, 660)
 
 
@@ -148,7 +159,7 @@ def main() -> None:
     parts = [p for p in args.parts.split(",") if p]
     if not set(parts) <= set(PARTS):
         raise SystemExit(f"--parts: choose among {', '.join(PARTS)}")
-    methods = [m for m in METHOD_OPTIONS if args.full or m != "robust-mincost"]
+    methods = [m for m in METHOD_OPTIONS if args.full or m not in FULL_ONLY]
     clips = {
         "131_01": bvh_clip("cmu_131_01_walk300.bvh"),
         "131_02": bvh_clip("cmu_131_02_walk300.bvh"),
@@ -157,9 +168,12 @@ def main() -> None:
         "131_02e": bvh_clip("cmu_131_02_stop300.bvh"),
         "131_01t": bvh_clip("cmu_131_01_stop244.bvh"),
         "131_02s": bvh_clip("cmu_131_02_start300.bvh"),
+        "131_01a": bvh_clip("cmu_131_01_stand150.bvh"),
+        "131_02a": bvh_clip("cmu_131_02_stand200.bvh"),
     }
     new_clips = ("131_01s", "131_02e")
     fresh_clips = ("131_01t", "131_02s")
+    unseen_clips = ("131_01a", "131_02a")
     dev_clips = ("131_01", "85_02")
     wins: list[tuple[str, Window]] = []
     for name, (P, pairs) in clips.items():
@@ -167,7 +181,9 @@ def main() -> None:
             if P[off::2].shape[0] < 60:
                 continue
             part = (
-                "new"
+                "unseen"
+                if name in unseen_clips
+                else "new"
                 if name in new_clips
                 else "fresh"
                 if name in fresh_clips

@@ -187,7 +187,8 @@ class ArticulatedTrajectory:
     radius : bone length of the result: the given one enlarged so that every ray meets the
         sphere (Sec 4.4.1), then refined within ``length_tol`` by the robust method.
     bqp_radius : radius of the sphere whose binary program (Eq 4.12) gave the result.
-    coeffs_theta, coeffs_phi : (K,) DCT coefficients of the spherical angles (radians).
+    coeffs_theta, coeffs_phi : (K',) DCT coefficients of the spherical angles (radians);
+        ``K' = k`` except where the robust method grew the basis (``refine_k_max``).
     bqp_size, bqp_nodes, bqp_optimal, bqp_gap : the binary program of Eq 4.12.
     n_observed : frames with an observation.
     rms : reprojection RMS in pixels, over the observed frames.
@@ -288,6 +289,13 @@ class ArticulatedOptions:
         towards the impostor side: a start that moves ten times less may fit the pixels
         worse by up to ``motion_weight`` standard deviations. 0 leaves the selection to
         ``smooth_weight``.
+    refine_k_max : robust method: largest DCT basis size of the final refinement. The ``k``
+        of the binary program and of the start selection is a prior on smoothness that
+        some motion (a subject starting to walk, an arm swinging up) exceeds; the selected
+        start is refined again with ``k + 1, …, refine_k_max`` vectors per angle and the
+        size with the lowest Bayesian information criterion on the reprojection error is
+        kept (sizes above half the observed frames are not tried). ``≤ k`` keeps ``k``
+        (session 6's method). The result's coefficients have the kept size.
     max_iter : Levenberg–Marquardt iterations of the refinement (≥ 1).
     time_limit : seconds per binary program (the best incumbent is used after it), or
         ``None``.
@@ -305,6 +313,7 @@ class ArticulatedOptions:
     flip_rounds: int = 3
     smooth_weight: float = 1.0
     motion_weight: float = 2.0
+    refine_k_max: int = 16
     max_iter: int = 100
     time_limit: float | None = None
     node_limit: int | None = DEFAULT_NODE_LIMIT
@@ -321,6 +330,7 @@ class ArticulatedOptions:
         check_int(self.flip_rounds, "flip_rounds", min=0, max=100)
         check_float(self.smooth_weight, "smooth_weight", min=0.0, max=1e6)
         check_float(self.motion_weight, "motion_weight", min=0.0, max=1e6)
+        check_int(self.refine_k_max, "refine_k_max", min=0, max=10_000)
         check_int(self.max_iter, "max_iter", min=1, max=100_000)
         if self.time_limit is not None:
             check_float(self.time_limit, "time_limit", min=0.0, max=1e9)

@@ -196,6 +196,8 @@ struct PyArticulatedOptions {
     #[pyo3(attribute)]
     motion_weight: f64,
     #[pyo3(attribute)]
+    refine_k_max: usize,
+    #[pyo3(attribute)]
     max_iter: usize,
     #[pyo3(attribute)]
     time_limit: Option<f64>,
@@ -225,6 +227,7 @@ fn art_options(o: &PyArticulatedOptions) -> PyResult<ArticulatedOptions> {
         flip_rounds: o.flip_rounds,
         smooth_weight: o.smooth_weight,
         motion_weight: o.motion_weight,
+        refine_k_max: o.refine_k_max,
         lm: socialcore::geometry::LmOptions {
             max_iterations: o.max_iter,
             ..defaults.lm

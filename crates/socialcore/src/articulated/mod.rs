@@ -66,6 +66,9 @@ pub const MOTION_WEIGHT: f64 = 2.0;
 /// equally smooth: keeps the logarithm finite for trajectories inside the basis.
 pub const ROUGHNESS_FLOOR: f64 = 1e-6;
 
+/// Default of [`ArticulatedOptions::refine_k_max`]: twice the default `k`.
+pub const REFINE_K_MAX: usize = 16;
+
 /// Settings of [`reconstruct_articulated`].
 #[derive(Debug, Clone, Copy)]
 pub struct ArticulatedOptions {
@@ -107,6 +110,15 @@ pub struct ArticulatedOptions {
     /// refined bone direction over the window, `Σ_t ‖u_t − ū‖²` (every frame, `u` the unit
     /// parent-to-child direction). 0 leaves the score of `smooth_weight` alone.
     pub motion_weight: f64,
+    /// Robust method: largest DCT basis size of the final refinement. The `k` of the binary
+    /// program and of the start selection is a prior on smoothness; the motion of a window
+    /// (a subject starting to walk, an arm swinging up) can need more. So the selected start
+    /// is refined again with `k + 1, …, refine_k_max` basis vectors per angle (new
+    /// coefficients start at zero) and the size with the lowest Bayesian information
+    /// criterion `2n ln(c / 2n) + (2k' + 1) ln 2n` on its reprojection cost `c` (`n`
+    /// observations) is kept. Sizes above half the observed frames are not tried;
+    /// `refine_k_max ≤ k` keeps `k` (session 6's method).
+    pub refine_k_max: usize,
 }
 
 impl Default for ArticulatedOptions {
@@ -127,6 +139,7 @@ impl Default for ArticulatedOptions {
             flip_rounds: 3,
             smooth_weight: SMOOTH_WEIGHT,
             motion_weight: MOTION_WEIGHT,
+            refine_k_max: REFINE_K_MAX,
         }
     }
 }
@@ -848,6 +861,25 @@ pub fn reconstruct_articulated(
         frame,
         prior,
     };
+    // The selected start with the basis grown to the motion (robust method).
+    let (wide, (at, ap, radius, lm_iterations, converged), c) = if robust && opts.refine {
+        grow_basis(
+            &fit,
+            (at, ap, radius, lm_iterations, converged),
+            c,
+            &span,
+            times,
+            opts.refine_k_max,
+            bounds,
+            &opts.lm,
+        )?
+    } else {
+        (theta.clone(), (at, ap, radius, lm_iterations, converged), c)
+    };
+    let fit = Fit {
+        theta: &wide,
+        ..fit
+    };
     let points: Vec<Vector3<f64>> = (0..f).map(|i| fit.point(i, &at, &ap, radius)).collect();
     let pixel_cost = c - prior.map_or(0.0, |(r0, w)| (w * (radius - r0) / r0).powi(2));
     let reprojection_rms = (pixel_cost.max(0.0) / obs.len().max(1) as f64).sqrt();
@@ -865,6 +897,56 @@ pub fn reconstruct_articulated(
         lm_iterations,
         converged,
     })
+}
+
+/// Bayesian information criterion of a refined fit: `2n ln(c / 2n) + (2k + 1) ln 2n` for a
+/// reprojection cost `c` (pixels²) over `n` observations and `k` coefficients per angle plus
+/// the bone length (a Gaussian pixel noise of unknown variance).
+fn refinement_bic(cost: f64, n_obs: usize, k: usize) -> f64 {
+    let n = (2 * n_obs).max(1) as f64;
+    n * (cost.max(f64::MIN_POSITIVE) / n).ln() + (2 * k + 1) as f64 * n.ln()
+}
+
+/// The selected start refined again with `k + 1, …, k_max` DCT vectors per angle (the
+/// first `k` coefficients carried over, the others from zero); the basis size with the
+/// lowest [`refinement_bic`] is kept. Returns the basis matrix, the fit and its cost.
+#[allow(clippy::too_many_arguments)]
+fn grow_basis(
+    fit: &Fit<'_>,
+    start: Refined,
+    cost: f64,
+    span: &DctSpan,
+    times: &[f64],
+    k_max: usize,
+    bounds: Option<(f64, f64)>,
+    lm: &LmOptions,
+) -> Result<(DMatrix<f64>, Refined, f64)> {
+    let k = start.0.len();
+    let n_obs = fit.obs.len();
+    let mut best_bic = refinement_bic(cost, n_obs, k);
+    let (a0, p0, r0) = (start.0.clone(), start.1.clone(), start.2);
+    let mut best = (fit.theta.clone(), start, cost);
+    for kk in k + 1..=k_max.min(n_obs / 2) {
+        crate::interrupt::check()?;
+        let theta = span.matrix(times, kk)?;
+        let grow = |a: &DVector<f64>| {
+            let mut g = DVector::zeros(kk);
+            g.rows_mut(0, k).copy_from(a);
+            g
+        };
+        let wide = Fit {
+            theta: &theta,
+            ..*fit
+        };
+        let refined = refine(&wide, grow(&a0), grow(&p0), r0, bounds, lm)?;
+        let c = wide.cost(&refined.0, &refined.1, refined.2);
+        let bic = refinement_bic(c, n_obs, kk);
+        if c.is_finite() && bic < best_bic {
+            best_bic = bic;
+            best = (theta, refined, c);
+        }
+    }
+    Ok(best)
 }
 
 /// Levenberg–Marquardt on Eq 4.5 over the `2K` angle coefficients, and the bone length

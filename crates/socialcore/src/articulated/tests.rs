@@ -391,3 +391,36 @@ fn start_selection_prefers_the_stiller_of_equal_starts() {
         Some(0)
     );
 }
+
+#[test]
+fn final_refinement_grows_the_basis_to_the_motion() {
+    // The angles use 5 DCT vectors; the binary program and the start selection run at
+    // k = 3. The selected start refined again with up to `refine_k_max` vectors (size by
+    // BIC) must fit the pixels to the noise and track the truth far better than at k = 3.
+    // Measured (seeds 0–5, uniform noise ±0.5 px, RMS 0.41): grown k' 5–8, error
+    // 0.004–0.072, RMS 0.33–0.42 px; at k = 3 error 0.28–0.36, RMS 8–15 px.
+    for seed in 0..6 {
+        let s = scene(60, 0.4, 0.5, seed);
+        let run = |refine_k_max: usize| {
+            let o = ArticulatedOptions {
+                refine_k_max,
+                ..opts(3)
+            };
+            reconstruct_articulated(&s.cameras, &s.pixels, &s.parent, &s.times, s.length, &o)
+                .expect("reconstructs")
+        };
+        let (grown, fixed) = (run(16), run(0));
+        let (eg, ef) = (rel_error(&grown.points, &s), rel_error(&fixed.points, &s));
+        let msg = format!(
+            "seed {seed}: k' {} error {eg:.4} rms {:.3}; k = 3 error {ef:.4} rms {:.3}",
+            grown.coeffs_theta.len(),
+            grown.reprojection_rms,
+            fixed.reprojection_rms
+        );
+        assert_eq!(fixed.coeffs_theta.len(), 3, "{msg}");
+        // BIC, not the lowest cost: the angles use 5 vectors, so no size near 16.
+        assert!((4..=10).contains(&grown.coeffs_theta.len()), "{msg}");
+        assert!(grown.reprojection_rms < 0.5, "{msg}");
+        assert!(eg < 0.1 && ef > 0.25 && eg < ef / 3.0, "{msg}");
+    }
+}
