@@ -296,6 +296,21 @@ class RunOptions:
         the false charges rise by 1.3-1.6 points (mean per seed; per seed −4 to +5).
         Without the bridge (every candidate kept): 66 % → 72 % false on six of those
         seeds; 1 s instead of 0.5 s was as good (seeds 1-32).
+    charge_pooling : seconds; 0 keeps each charge where its own frame puts it. Else a
+        charge is moved to the least-squares point (weights ``1/(s²h²)``, ``s`` the depth
+        along the ray, Sec 6.2) of its members' rays each averaged over the output times at
+        most this far away (a ray of such a time counts when it passes within
+        2 ``member_sigma`` bandwidths of the charge: a wearer who looks elsewhere then drops
+        out). Two rays that cross at a shallow angle put their single-frame intersection
+        far off in depth when one of them is 2-3 ``h`` off the target (the eye-in-head
+        jitter of Sec 3.1); the neighbouring times' rays average the jitter. On the true
+        cameras of rendered scenes 0.1 s (the frames before and after) finds joint
+        attention in 98.6 % instead of 98.3 % of the frames (seeds 1-32: seed 20
+        84 % → 92 %, 22 90 % → 100 %, 7 +1 frame, 5 −1 frame) and as often on fresh seeds
+        33-64 (97.3 %, every seed the same); the median error per seed falls 0.096 → 0.092 m
+        (median over seeds 1-32) and 0.088 → 0.084 m (33-64). 0.2 s: 99.0 % on 1-32 but
+        97.0 % on 33-64 (three seeds −1 frame). It moves charges, it does not add any: a
+        wearer whose eyes stay 2-2.5 ``h`` off for 0.6 s (seed 50: 70 %) is not helped.
     min_members, membership : social charges (:class:`socialcam.ChargeOptions`).
         ``membership`` defaults to the thesis' rule ``"all"`` (a ray may count for several
         charges): wearers' eyes are at one height, so nearly every two rays cross somewhere in
@@ -329,6 +344,7 @@ class RunOptions:
     charge_persistence: float = 0.1
     member_sigma: float = 3.0
     pair_bridge: float = 0.5
+    charge_pooling: float = 0.1
     min_members: int = 2
     membership: str = "all"
     track_bandwidth: float = 0.3
@@ -358,6 +374,7 @@ class RunOptions:
         check_float(self.charge_persistence, "charge_persistence", min=0.0)
         check_float(self.member_sigma, "member_sigma", min=0.0, min_exclusive=True)
         check_float(self.pair_bridge, "pair_bridge", min=0.0)
+        check_float(self.charge_pooling, "charge_pooling", min=0.0)
         check_int(self.min_members, "min_members", min=1)
         check_choice(self.membership, "membership", MEMBERSHIP_RULES)
         check_float(self.track_bandwidth, "track_bandwidth", min=0.0, min_exclusive=True)
@@ -1055,6 +1072,7 @@ def run(
                 "min_charge_depth",
                 "charge_persistence",
                 "pair_bridge",
+                "charge_pooling",
             ),
         )
         cache = _Cache(out, "charges", key)
@@ -1308,7 +1326,75 @@ def _find_charges(
         charges = _persistent(charges, times, opts.charge_persistence, opts.min_members)
     if opts.pair_bridge > 0:
         charges = _bridged(charges, times, opts.pair_bridge, opts.min_members)
+    if opts.charge_pooling > 0:
+        charges = _pooled(charges, frames, times, opts)
     return charges
+
+
+#: a member's ray of a neighbouring time counts within this many ``member_sigma`` of the
+#: charge (:func:`_pooled`)
+POOL_GATE = 2.0
+
+
+def _pooled(
+    charges: Sequence[Sequence[Charge]],
+    frames: Sequence[GazeRays | None],
+    times: FloatArray,
+    opts: RunOptions,
+) -> list[list[Charge]]:
+    """Each charge moved to the weighted least-squares point of its members' rays averaged
+    over the output times at most ``charge_pooling`` seconds away (see
+    :class:`RunOptions`)."""
+    t = np.asarray(times, dtype=np.float64)
+    w = opts.charge_pooling
+    out: list[list[Charge]] = []
+    for k, cs in enumerate(charges):
+        lo = int(np.searchsorted(t, t[k] - w - 1e-9))
+        hi = int(np.searchsorted(t, t[k] + w + 1e-9, side="right"))
+        near = [f for f in frames[lo:hi] if f is not None]
+        moved = []
+        for c in cs:
+            rays = [_mean_ray(c, near, m, opts.member_sigma) for m in c.members.tolist()]
+            x = _ls_point(*map(np.array, zip(*rays, strict=True)))
+            moved.append(c if x is None else replace(c, position=x))
+        out.append(moved)
+    return out
+
+
+def _mean_ray(
+    c: Charge, near: Sequence[GazeRays], member: int, sigma: float
+) -> tuple[FloatArray, FloatArray, float]:
+    """Member ``member``'s ray averaged over the frames ``near``: mean eye, mean direction
+    of the rays within ``sigma`` bandwidths (angle) of the mean of all its directions (a
+    wearer who looks elsewhere for part of the time then counts less), mean ``h``."""
+    p = np.concatenate([f.p[f.ids == member] for f in near])
+    v = np.concatenate([f.v[f.ids == member] for f in near])
+    h = np.concatenate([f.h[f.ids == member] for f in near])
+    to = c.position - p
+    to /= np.linalg.norm(to, axis=1, keepdims=True)
+    keep = np.einsum("ij,ij->i", to, v) >= np.cos(POOL_GATE * sigma * h)
+    if not keep.any():
+        keep[:] = True
+    u = v[keep].mean(axis=0)
+    return p[keep].mean(axis=0), u / np.linalg.norm(u), float(h[keep].mean())
+
+
+def _ls_point(p: FloatArray, v: FloatArray, h: FloatArray) -> FloatArray | None:
+    """The least-squares point of rays (``p``, ``v``: (N, 3), ``h``: (N,)) weighted by
+    ``1/(s²h²)``, ``s`` the depth along each ray (Sec 6.2; two passes, the depths from the
+    unweighted point); None when the rays do not fix a point in front of them."""
+    proj = np.eye(3)[None] - v[:, :, None] * v[:, None, :]
+    wt = 1.0 / h**2
+    for _ in range(2):
+        a = np.einsum("i,ijk->jk", wt, proj)
+        if np.linalg.cond(a) > 1e8:
+            return None
+        x = np.linalg.solve(a, np.einsum("i,ijk,ik->j", wt, proj, p))
+        s = np.einsum("ij,ij->i", x - p, v)
+        if (s <= 0).any():
+            return None
+        wt = 1.0 / (s * h) ** 2
+    return x
 
 
 #: how far (metres) the same charge may lie in a neighbouring frame (``charge_persistence``)
