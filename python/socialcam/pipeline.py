@@ -1365,8 +1365,9 @@ def _mean_ray(
     c: Charge, near: Sequence[GazeRays], member: int, sigma: float
 ) -> tuple[FloatArray, FloatArray, float]:
     """Member ``member``'s ray averaged over the frames ``near``: mean eye, mean direction
-    of the rays within ``sigma`` bandwidths (angle) of the mean of all its directions (a
-    wearer who looks elsewhere for part of the time then counts less), mean ``h``."""
+    and mean ``h`` of its rays that pass within ``POOL_GATE · sigma`` bandwidths (angle,
+    ``h`` each) of the charge ``c`` (all of them when none does): a wearer who looks
+    elsewhere for part of the time then drops out there."""
     p = np.concatenate([f.p[f.ids == member] for f in near])
     v = np.concatenate([f.v[f.ids == member] for f in near])
     h = np.concatenate([f.h[f.ids == member] for f in near])
@@ -1382,7 +1383,9 @@ def _mean_ray(
 def _ls_point(p: FloatArray, v: FloatArray, h: FloatArray) -> FloatArray | None:
     """The least-squares point of rays (``p``, ``v``: (N, 3), ``h``: (N,)) weighted by
     ``1/(s²h²)``, ``s`` the depth along each ray (Sec 6.2; two passes, the depths from the
-    unweighted point); None when the rays do not fix a point in front of them."""
+    point weighted by ``1/h²``); None when the rays do not fix a point in front of them.
+    The core's charge fits reweight the same objective to convergence; two passes are
+    what the ``charge_pooling`` figures were measured with."""
     proj = np.eye(3)[None] - v[:, :, None] * v[:, None, :]
     wt = 1.0 / h**2
     for _ in range(2):
