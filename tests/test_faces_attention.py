@@ -15,8 +15,12 @@ import pytest
 from scipy.spatial.transform import Rotation
 
 from socialcam.faces import (
+    _accel_ties,
+    _pentadiagonal_marginals,
     _shape_covariance,
+    _solve_upper_banded,
     _tridiagonal_marginals,
+    _upper_banded,
     fuse_ego_exo,
     reconstruct_faces,
 )
@@ -133,6 +137,93 @@ def test_tridiagonal_marginals_match_the_dense_inverse():
     got = _tridiagonal_marginals(A, w)
     for i in range(n):
         np.testing.assert_allclose(got[i], inv[6 * i : 6 * i + 6, 6 * i : 6 * i + 6], atol=1e-12)
+
+
+def _dense(A, o1, o2):
+    """The symmetric matrix of diagonal blocks ``A (n, 6, 6)`` and diagonal blocks
+    ``diag(o1_i)``, ``diag(o2_i)`` one and two blocks off the diagonal."""
+    n = len(A)
+    F = np.zeros((6 * n, 6 * n))
+    for i in range(n):
+        F[6 * i : 6 * i + 6, 6 * i : 6 * i + 6] = A[i]
+    for k, o in ((1, o1), (2, o2)):
+        for i in range(n - k):
+            F[6 * i : 6 * i + 6, 6 * (i + k) : 6 * (i + k) + 6] = np.diag(o[i])
+            F[6 * (i + k) : 6 * (i + k) + 6, 6 * i : 6 * i + 6] = np.diag(o[i])
+    return F
+
+
+@pytest.mark.parametrize("n", [6, 7])
+def test_pentadiagonal_marginals_match_the_dense_inverse(n):
+    """The marginals under the turning-rate ties (blocks two instants apart), by pairs of
+    instants, and the banded solve the rigid fit uses, against dense linear algebra."""
+    rng = np.random.default_rng(n)
+    M = rng.normal(size=(n, 6, 6))
+    A = M @ np.transpose(M, (0, 2, 1)) + 12 * np.eye(6)
+    o1, o2 = rng.uniform(-2, 2, (n - 1, 6)), rng.uniform(-2, 2, (n - 2, 6))
+    inv = np.linalg.inv(_dense(A, o1, o2))
+    got = _pentadiagonal_marginals(A, o1, o2)
+    for i in range(n):
+        np.testing.assert_allclose(got[i], inv[6 * i : 6 * i + 6, 6 * i : 6 * i + 6], atol=1e-12)
+    b = rng.normal(size=(6 * n, 2))
+    np.testing.assert_allclose(_solve_upper_banded(_upper_banded(A, o1, o2), b), inv @ b,
+                               atol=1e-10)  # fmt: skip
+
+
+def test_turning_rate_ties_are_least_squares_of_their_residual():
+    """``_accel_ties`` adds ``Jᵀ W J`` and ``Jᵀ W r`` of the residual ``(e_i + x_{i+1} −
+    x_i) / Δt_i − (e_{i−1} + x_i − x_{i−1}) / Δt_{i−1}`` (the change of the turning rate,
+    with ``x`` the rotation updates), its Jacobian taken here by finite differences."""
+    rng = np.random.default_rng(3)
+    n = 6
+    e = rng.normal(scale=0.05, size=(n - 1, 3))
+    dt = rng.uniform(0.05, 0.15, n - 1)
+    accel = 0.7
+
+    def res(x):
+        ex = e + x[1:] - x[:-1]
+        return (ex[1:] / dt[1:, None] - ex[:-1] / dt[:-1, None]).reshape(-1)
+
+    r0 = res(np.zeros((n, 3)))
+    J = np.empty((len(r0), 3 * n))
+    for a in range(3 * n):
+        d = np.zeros(3 * n)
+        d[a] = 1e-6
+        J[:, a] = (res(d.reshape(n, 3)) - r0) / 1e-6
+    W = np.repeat(1.0 / (accel * 0.5 * (dt[1:] + dt[:-1])) ** 2, 3)
+    want_H, want_g = J.T @ (W[:, None] * J), J.T @ (W * r0)
+    g = np.zeros((n, 6))
+    Hb, o1, o2 = _accel_ties(np.zeros((n, 6, 6)), g, np.zeros((n - 1, 6)),
+                             np.zeros((n - 2, 6)), e, dt, accel, robust=False)  # fmt: skip
+    full = _dense(Hb, o1, o2)
+    rot = np.r_[[6 * i + a for i in range(n) for a in range(3)]]
+    np.testing.assert_allclose(full[np.ix_(rot, rot)], want_H, rtol=1e-4)
+    np.testing.assert_allclose(g[:, :3].reshape(-1), want_g, rtol=1e-4)
+    assert not full[3::6].any() and not g[:, 3:].any()  # positions untouched
+    # robust: a turn far beyond the scale gets a small weight
+    e[2] += 1.0
+    g2 = np.zeros((n, 6))
+    Hr, _, _ = _accel_ties(np.zeros((n, 6, 6)), g2, np.zeros((n - 1, 6)),
+                           np.zeros((n - 2, 6)), e, dt, accel, robust=True)  # fmt: skip
+    assert Hr[3, 0, 0] < 0.01 * Hb[3, 0, 0]
+
+
+def test_turning_rate_ties_reach_the_fit(scene):
+    """``rigid_turn_accel`` (on by default) reaches the rigid fit: the rays' σ shrinks (the
+    marginal under more ties; measured 1.72 → 1.56° median on this scene) and the gaze is
+    no worse (2.10 → 2.09°; circles 1–6, 10 s: 2.42 → 2.23° median)."""
+    truth, f3, r, _one = scene
+    dets, cams = truth_detections(truth, scale=8.0, seed=1)
+    f0 = reconstruct_faces(dets, cams, rigid_turn_accel=None)
+    scaled = dataclasses.replace(truth, K=np.stack([c.K[0] for c in cams]))
+    r0 = faces_vs_truth(scaled, dets, f0)
+    ok = np.isfinite(f3.v[..., 0])
+    assert (ok == np.isfinite(f0.v[..., 0])).all()
+    sig, sig0 = (np.sqrt(np.maximum(f.h[ok] ** 2 - 0.05**2, 0.0)) for f in (f3, f0))
+    assert np.median(sig) < 0.95 * np.median(sig0), (np.median(sig), np.median(sig0))
+    assert r["gaze_deg"] <= 1.02 * r0["gaze_deg"], (r["gaze_deg"], r0["gaze_deg"])
+    with pytest.raises(ValueError, match="rigid_turn_accel"):
+        reconstruct_faces(dets, cams, rigid_turn_accel=0.0)
 
 
 def test_shape_covariance_is_the_joint_inverses_extra_term():

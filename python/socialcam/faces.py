@@ -373,6 +373,22 @@ class FaceOptions:
         conversation circles turn by 0.6° per frame (median, 10 fps: 0.1 rad/s) between
         jumps to a new speaker; measured on circles seeds 1–12 (6 wearers + 3 people, 10 s,
         detector-like landmarks), median gaze 2.30 / 2.23 / 2.55° at 0.05 / 0.1 / 0.25 rad/s
+    rigid_turn_accel : with ``rigid``, the turning rates of consecutive instant pairs are
+        tied too: for each instant the change of the angular velocity (rotation vector
+        between neighbours over their spacing) from one side to the other, weighted
+        ``1 / (rigid_turn_accel · Δt)²`` (rad/s²), with robust (Cauchy) weights. An
+        extension of Eq 3.4, whose temporal term is first order (it pulls a turning head
+        towards a still one). Measured error components on rendered circles (seeds 1–3,
+        against the renderer's head direction): the landmark-plane normal IS the head
+        direction there (0.00°), the fitted shape adds nothing (the true shape in its
+        place: same error), a per-person bias is small (0.2–1.8° per track against a
+        1.5–6° scatter); the rest is the pose of each instant from 2–3 views (4.3–5.1°
+        median alone with 3 % landmark noise) and what the ties make of it: with exact
+        landmarks the first-order ties leave 1.1° (their lag on slow turns; 0.01° without
+        ties, 0.2–0.5° with second-order ties alone, 1.1–1.3° with both). With 3 % noise
+        the second-order ties average more of it: circles 1–6 median gaze 2.42 → 2.23°
+        (better on all six; flat over 0.3–3 rad/s² and first-order rates 0.1–0.5 rad/s,
+        2.19–2.30°). ``None`` = first-order ties only
     single_view : a tracked face (a wearer's, or a track's) seen by ONE camera at an
         instant within ``max_gap`` instants of its multi-view span joins the track there:
         Eq 3.4 and the rigid face place it (the position tied over time at ``smoothness``,
@@ -400,6 +416,7 @@ class FaceOptions:
     sync_tolerance: float | None = None
     rigid: bool = True
     rigid_turn_rate: float | None = 0.1
+    rigid_turn_accel: float | None = 1.0
     single_view: bool = False
 
     def __post_init__(self) -> None:
@@ -419,6 +436,8 @@ class FaceOptions:
             check_float(self.turn_rate, "turn_rate", min=0.0, min_exclusive=True)
         if self.rigid_turn_rate is not None:
             check_float(self.rigid_turn_rate, "rigid_turn_rate", min=0.0, min_exclusive=True)
+        if self.rigid_turn_accel is not None:
+            check_float(self.rigid_turn_accel, "rigid_turn_accel", min=0.0, min_exclusive=True)
         if self.sync_tolerance is not None:
             check_float(self.sync_tolerance, "sync_tolerance", min=0.0, min_exclusive=True)
         check_int(self.max_gap, "max_gap", min=0)
@@ -498,15 +517,22 @@ def _tridiagonal_marginals(A: FloatArray, w: FloatArray) -> FloatArray:
     """Diagonal blocks ``(n, 6, 6)`` of the inverse of the symmetric block-tridiagonal
     matrix with diagonal blocks ``A (n, 6, 6)`` and diagonal off-diagonal blocks
     ``−diag(w_i)``: ties per axis ``w (n − 1, 6)``, or ``(n − 1,)`` on the first three
-    axes only (the rotation ties), by forward Schur complements and the backward
-    recursion: linear in ``n``."""
+    axes only (the rotation ties); see :func:`_block_tridiagonal_marginals`."""
     n = len(A)
     w6 = np.zeros((n - 1, 6))
     if w.ndim == 1:
         w6[:, :3] = w[:, None]
     else:
         w6[:] = w
-    B = -w6[:, :, None] * np.eye(6)
+    return _block_tridiagonal_marginals(A, -w6[:, :, None] * np.eye(6))
+
+
+def _block_tridiagonal_marginals(A: FloatArray, B: FloatArray) -> FloatArray:
+    """Diagonal blocks ``(n, m, m)`` of the inverse of the symmetric block-tridiagonal
+    matrix with diagonal blocks ``A (n, m, m)`` and upper off-diagonal blocks ``B (n − 1,
+    m, m)`` (block ``(i, i + 1)``), by forward Schur complements and the backward
+    recursion: linear in ``n``."""
+    n = len(A)
     Dinv = np.empty_like(A)
     D = A[0]
     for i in range(n):
@@ -519,6 +545,103 @@ def _tridiagonal_marginals(A: FloatArray, w: FloatArray) -> FloatArray:
         G = Dinv[i] @ B[i]
         out[i] = Dinv[i] + G @ out[i + 1] @ G.T
     return out
+
+
+def _pentadiagonal_marginals(A: FloatArray, o1: FloatArray, o2: FloatArray) -> FloatArray:
+    """Diagonal blocks ``(n, 6, 6)`` of the inverse of the symmetric block matrix with
+    diagonal blocks ``A (n, 6, 6)`` and DIAGONAL off-diagonal blocks ``diag(o1_i)``
+    (block ``(i, i + 1)``, ``o1 (n − 1, 6)``) and ``diag(o2_i)`` (block ``(i, i + 2)``,
+    ``o2 (n − 2, 6)``): pairs of instants make it block-tridiagonal with 12 × 12 blocks
+    (an odd ``n`` gets one uncoupled identity block), still linear in ``n``."""
+    n = len(A)
+    m = (n + 1) // 2
+    full = np.zeros((2 * m, 6, 6))
+    full[:n] = A
+    if n % 2:
+        full[n] = np.eye(6)
+    off = [np.zeros((2 * m - 1, 6)), np.zeros((2 * m - 2, 6))]
+    off[0][: n - 1] = o1
+    off[1][: max(n - 2, 0)] = o2
+    P = np.zeros((m, 12, 12))
+    Q = np.zeros((max(m - 1, 0), 12, 12))
+    eye = np.eye(6)
+    for k in range(m):
+        P[k, :6, :6], P[k, 6:, 6:] = full[2 * k], full[2 * k + 1]
+        P[k, :6, 6:] = P[k, 6:, :6] = off[0][2 * k] * eye
+    for k in range(m - 1):  # pair k (2k, 2k + 1) to pair k + 1 (2k + 2, 2k + 3)
+        Q[k, :6, :6] = off[1][2 * k] * eye
+        Q[k, 6:, :6] = off[0][2 * k + 1] * eye
+        Q[k, 6:, 6:] = off[1][2 * k + 1] * eye
+    out = _block_tridiagonal_marginals(P, Q)
+    return np.concatenate([out[:, :6, :6], out[:, 6:, 6:]], axis=1).reshape(2 * m, 6, 6)[:n]
+
+
+def _accel_ties(
+    Hb: FloatArray,
+    gd: FloatArray,
+    o1: FloatArray,
+    o2: FloatArray,
+    e: FloatArray,
+    dt: FloatArray,
+    accel: float,
+    robust: bool,
+) -> tuple[FloatArray, FloatArray, FloatArray]:
+    """Adds to the normal equations of the rigid poses (diagonal blocks ``Hb (n, 6, 6)``,
+    gradient ``gd (n, 6)`` in place, diagonal off-diagonal blocks ``o1 (n − 1, 6)``,
+    ``o2 (n − 2, 6)``) the ties of the turning rate: for every inner instant ``i`` the
+    residual ``e_i / Δt_i − e_{i−1} / Δt_{i−1}`` (rad/s; ``e`` the rotation vectors between
+    consecutive instants) with weight ``1 / (accel · Δt̄)²`` (``Δt̄`` the mean of the two
+    spacings), Cauchy after the first step (``robust``). Returns ``Hb, o1, o2``."""
+    n = len(Hb)
+    r = e[1:] / dt[1:, None] - e[:-1] / dt[:-1, None]  # (n - 2, 3)
+    lam = 1.0 / (accel * 0.5 * (dt[1:] + dt[:-1])) ** 2
+    w = lam / (1.0 + lam * np.einsum("ni,ni->n", r, r)) if robust else lam
+    # coefficients of the rotation updates of instants i - 1, i, i + 1 in the residual
+    a = np.stack([1.0 / dt[:-1], -1.0 / dt[:-1] - 1.0 / dt[1:], 1.0 / dt[1:]], axis=1)
+    Hb, o1, o2 = Hb.copy(), o1.copy(), o2.copy()
+    idx = np.arange(1, n - 1)
+    for p in range(3):
+        gd[idx - 1 + p, :3] += (w * a[:, p])[:, None] * r
+        Hb[idx - 1 + p, :3, :3] += (w * a[:, p] ** 2)[:, None, None] * np.eye(3)
+        for q in range(p + 1, 3):
+            cpq = (w * a[:, p] * a[:, q])[:, None]
+            if q - p == 1:
+                o1[idx - 1 + p, :3] += cpq
+            else:
+                o2[idx - 1, :3] += cpq
+    return Hb, o1, o2
+
+
+def _solve_upper_banded(ab: FloatArray, b: FloatArray) -> FloatArray:
+    """``scipy.linalg.solveh_banded(ab, b)`` for the upper banded form ``ab (u + 1, N)``,
+    through the general banded LU (``solve_banded``): measured, the banded Cholesky of
+    scipy's OpenBLAS takes 100× longer once the bandwidth exceeds 16 (here 17, with the
+    turning-rate ties)."""
+    from scipy.linalg import solve_banded  # type: ignore[import-untyped,unused-ignore]
+
+    u, N = ab.shape[0] - 1, ab.shape[1]
+    full = np.zeros((2 * u + 1, N))
+    full[: u + 1] = ab
+    for k in range(1, u + 1):
+        full[u + k, : N - k] = ab[u - k, k:]
+    return np.asarray(solve_banded((u, u), full, b), np.float64)
+
+
+def _upper_banded(D: FloatArray, o1: FloatArray, o2: FloatArray | None) -> FloatArray:
+    """The symmetric block matrix with diagonal blocks ``D (n, 6, 6)`` and diagonal
+    off-diagonal blocks ``diag(o1_i)`` at ``(i, i + 1)`` (and ``diag(o2_i)`` at ``(i, i +
+    2)``) in the upper banded form of ``scipy.linalg.solveh_banded``."""
+    n = len(D)
+    u = 11 if o2 is None else 17
+    ab = np.zeros((u + 1, 6 * n))
+    for i in range(6):
+        for j in range(i, 6):
+            ab[u + i - j, j::6] = D[:, i, j]
+    for i in range(6):
+        ab[u - 6, 6 + i :: 6][: n - 1] = o1[:, i]
+        if o2 is not None:
+            ab[u - 12, 12 + i :: 6][: n - 2] = o2[:, i]
+    return ab
 
 
 def _rigid_track(
@@ -536,6 +659,7 @@ def _rigid_track(
     iterations: int = 5,
     shape: bool = True,
     centre_rate: float | None = None,
+    turn_accel: float | None = None,
 ) -> tuple[FloatArray, FloatArray]:
     """One rigid face per track: the shape is the weighted Procrustes mean of the track's
     landmarks ``X (n, 5, 3)`` (the observed instants ``0..n-1``), and every instant gets the
@@ -547,7 +671,8 @@ def _rigid_track(
     one camera (weight 0 in ``weight``, its ``X`` only a starting point). The rotation
     covariance includes the uncertainty of the shape (which decides how one view turns a
     face: a shape a little too deep or too flat turns it by much more than the landmark
-    noise alone says)."""
+    noise alone says). ``turn_accel`` (rad/s²) also ties the change of the turning rate
+    over three consecutive instants (robust, Cauchy): see ``FaceOptions.rigid_turn_accel``."""
     n = len(X)
     # generalised Procrustes: align every instant to the mean shape, average, repeat
     S = X[int(np.argmax(weight))] - X[int(np.argmax(weight))].mean(0)
@@ -585,46 +710,46 @@ def _rigid_track(
         np.add.at(H, step, np.einsum("rka,rkb->rab", J, J))
         np.add.at(g, step, np.einsum("rka,rk->ra", J, r0))
         H += 1e-9 * np.eye(6)
-        if turn_rate is None or times is None or n < 2:
+        tied = (turn_rate is not None or turn_accel is not None) and times is not None and n > 1
+        if not tied:
             dx = -np.linalg.solve(H, g[..., None])[..., 0]
         else:  # rotations of consecutive instants tied together (robust, Cauchy)
-            from scipy.linalg import solveh_banded  # type: ignore[import-untyped,unused-ignore]
             from scipy.spatial.transform import (  # type: ignore[import-untyped,unused-ignore]
                 Rotation,
             )
 
+            assert times is not None
             e = Rotation.from_matrix(Rt[1:] @ np.transpose(Rt[:-1], (0, 2, 1))).as_rotvec()
-            lam = 1.0 / (turn_rate * np.maximum(np.diff(times), 1e-6)) ** 2
+            dt = np.maximum(np.diff(times), 1e-6)
             # Cauchy (scale 1 σ), after one plain quadratic step: the rotations of single
             # instants scatter by more than the tie's scale, and Cauchy weights taken from
             # that scatter would cut nearly every tie (measured on rendered circles, seeds
             # 1-12: gaze 2.9 → 2.2° median with the quadratic start)
-            w = lam if it == 0 else lam / (1.0 + lam * np.einsum("ni,ni->n", e, e))
             ties = np.zeros((n - 1, 6))
-            ties[:, :3] = w[:, None]
+            if turn_rate is not None:
+                lam = 1.0 / (turn_rate * dt) ** 2
+                w = lam if it == 0 else lam / (1.0 + lam * np.einsum("ni,ni->n", e, e))
+                ties[:, :3] = w[:, None]
             e6 = np.c_[e, c[1:] - c[:-1]]
             if centre_rate is not None:
-                ties[:, 3:] = (1.0 / (centre_rate * np.maximum(np.diff(times), 1e-6)) ** 2)[:, None]
-            # block-tridiagonal normal matrix in the upper banded form of solveh_banded
-            ab = np.zeros((12, 6 * n))
-            gd = g.copy()
+                ties[:, 3:] = (1.0 / (centre_rate * dt) ** 2)[:, None]
             Hb = H.copy()
             Hb[:-1] += ties[:, :, None] * np.eye(6)
             Hb[1:] += ties[:, :, None] * np.eye(6)
+            gd = g.copy()
             gd[1:] += ties * e6
             gd[:-1] -= ties * e6
-            for i in range(6):
-                for j in range(i, 6):
-                    ab[11 + i - j, j::6] = Hb[:, i, j]
-            for i in range(6):
-                ab[11 - 6, 6 + i :: 6][: n - 1] = -ties[:, i]
-            dx = -solveh_banded(ab, gd.reshape(-1)).reshape(n, 6)
+            o1, o2 = -ties, np.zeros((max(n - 2, 0), 6))
+            if turn_accel is not None and n > 2:  # the turning rate's change, Cauchy too
+                Hb, o1, o2 = _accel_ties(Hb, gd, o1, o2, e, dt, turn_accel, robust=it > 0)
+            ab = _upper_banded(Hb, o1, o2 if turn_accel is not None and n > 2 else None)
+            dx = -_solve_upper_banded(ab, gd.reshape(-1)).reshape(n, 6)
         Rt = _rotvec(np.asarray(dx[:, :3], np.float64)) @ Rt
         c = c + dx[:, 3:]
-        if turn_rate is None or times is None or n < 2:
+        if not tied:
             cov = np.linalg.inv(H)[:, :3, :3]
         else:  # each instant's marginal covariance under the ties (what the track knows)
-            cov = _tridiagonal_marginals(Hb, ties)[:, :3, :3]
+            cov = _pentadiagonal_marginals(Hb, o1, o2)[:, :3, :3]
         if shape:  # one Gauss–Newton step on the shape shared by all instants
             rs = residual(Rt, c, S).reshape(-1)
             Js = np.empty((len(rs), 15))
@@ -632,7 +757,7 @@ def _rigid_track(
                 ds = np.zeros(15)
                 ds[a] = eps
                 Js[:, a] = (residual(Rt, c, S + ds.reshape(5, 3)).reshape(-1) - rs) / eps
-            if it == iterations - 1 and turn_rate is not None and times is not None and n > 1:
+            if it == iterations - 1 and tied:
                 cov = cov + _shape_covariance(ab, J, Js.reshape(len(slot), 10, 15), step, S)
             step_s = np.linalg.solve(Js.T @ Js + 1e-6 * np.eye(15), Js.T @ rs)
             S = S - step_s.reshape(5, 3)
@@ -648,7 +773,6 @@ def _shape_covariance(
     6)`` and shape Jacobians ``Js (rows, 10, 15)``) and the shape's Schur complement
     ``Σ_s = (H_ss − Bᵀ A⁻¹ B)⁻¹``, the term ``(A⁻¹ B)_i Σ_s (A⁻¹ B)_iᵀ`` of the joint
     inverse. The shape's gauge (moving or turning it with all poses) is fixed."""
-    from scipy.linalg import solveh_banded  # type: ignore[import-untyped,unused-ignore]
 
     n = ab.shape[1] // 6
     B = np.zeros((n, 6, 15))
@@ -663,7 +787,7 @@ def _shape_covariance(
         G[:, 3 + a] = np.cross(w, S).reshape(-1)
     G /= np.maximum(np.linalg.norm(G, axis=0), 1e-12)
     Hss = Hss + 1e6 * np.trace(Hss) * G @ G.T
-    AiB = solveh_banded(ab, B.reshape(6 * n, 15)).reshape(n, 6, 15)
+    AiB = _solve_upper_banded(ab, B.reshape(6 * n, 15)).reshape(n, 6, 15)
     M = Hss - np.einsum("nai,naj->ij", B, AiB)
     Ss = np.linalg.pinv(0.5 * (M + M.T), hermitian=True)
     return np.einsum("nai,ij,nbj->nab", AiB[:, :3], Ss, AiB[:, :3])
@@ -947,6 +1071,7 @@ def reconstruct_faces(
                 K_, R_, C_, at, slot_[rows], lm_[rows], sigma[rows], xr[ts - t0],
                 np.where(nviews[gs] >= 2, nviews[gs], 0).astype(np.float64), times[ts],
                 o.rigid_turn_rate, centre_rate=o.smoothness if o.smoothness > 0 else None,
+                turn_accel=o.rigid_turn_accel,
             )  # fmt: skip
             n0 = np.cross(
                 L[ts, j, 1] - L[ts, j, 0], L[ts, j, 3] + L[ts, j, 4] - L[ts, j, 0] - L[ts, j, 1]
