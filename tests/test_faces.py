@@ -360,15 +360,18 @@ def test_rigid_faces_lower_the_gaze_error():
     instant fitted to the detections, rotations tied over time with robust weights).
     Measured gaze median over seeds 0-4 (1 px noise): 4.9° (landmarks only, Eq 3.4) ->
     4.6° (rigid, instants alone) -> 3.5° (rigid, rotations tied at 0.1 rad/s; 3.3° at 0.25:
-    these faces turn at up to 0.9 rad/s); landmarks 5.5 -> 3.3 mm."""
+    these faces turn at up to 0.9 rad/s) -> 2.6° (the turning rate tied too, 1 rad/s²:
+    these faces turn smoothly); landmarks 5.5 -> 3.3 mm."""
     ws = [_World(s) for s in range(5)]
 
     def score(**kw):
         return np.median([_score(w, reconstruct_faces(w.dets, w.cams, anchors=False, **kw))
                           for w in ws], axis=0)  # fmt: skip
 
-    plain, alone, tied = score(rigid=False), score(rigid_turn_rate=None), score()
+    plain, alone = score(rigid=False), score(rigid_turn_rate=None, rigid_turn_accel=None)
+    tied, first = score(), score(rigid_turn_accel=None)
     assert tied[3] < 0.8 * plain[3] and tied[3] < 0.85 * alone[3], (plain, alone, tied)
+    assert tied[3] < 0.85 * first[3], (first, tied)
     assert tied[2] < 0.75 * plain[2], (plain, tied)
     with pytest.raises(ValueError, match="rigid_turn_rate"):
         reconstruct_faces(ws[0].dets, ws[0].cams, rigid_turn_rate=-1.0)
