@@ -301,7 +301,10 @@ class RunOptions:
         within it) is unobserved, and the mode on the other side suffices: seed 56 lost
         the last 0.4 s of a pair's attention for want of a mode after the end of the clip
         (89 % → 98 %); on seeds 1-64 98.0 % → 98.5 % (44, 54, 56, 60 gain 1-4 frames), the
-        false charges +0.3 points (mean per seed; −1 to +3 per seed).
+        false charges +0.3 points (mean per seed; −1 to +3 per seed). A mode on either
+        side for every candidate (observed or not) found 6 more frames of 1982 (seeds
+        1-64 with the track fit) for 3.4 points more false charges (up to 11 per seed):
+        not taken.
     charge_pooling : seconds; 0 keeps each charge where its own frame puts it. Else each
         charge is moved to where its track is at its time (an extension of Sec 6.1.3,
         which follows a charge by its members and lets it move). The track: out from the
