@@ -331,8 +331,9 @@ class RunOptions:
         rule for unobserved sides): seeds 5, 6, 7, 20, 44, 50, 62 gain 1-2 frames each
         (20: 92 → 100 %, 62: 90 → 100 %), 57 loses one; the median error per seed falls
         by 4 mm (median; 35 seeds better, 21 worse, −45 to +35 mm) and the false
-        charges are unchanged. Through SfM (seeds 1-3, 33) the error ratio to the true
-        cameras is 0.95-1.03. Seed 50 stays at 75 %: for 0.6 s there, the rays make a
+        charges are unchanged. 0.3 s: 98.8 % (seeds 6, 20 lose 1-2 frames), 0.7 s:
+        98.9 % (50 gains one, 26 loses one). Through SfM (seeds 1-3, 33) the error ratio
+        to the true cameras is 0.95-1.03. Seed 50 stays at 75 %: for 0.6 s there, the rays make a
         point 0.5-0.8 m off about 2.6 nats per frame more likely than the target (one ray
         2.2-2.5 ``h`` off it, the other 0.6-1 ``h``); no fit of these rays moves it.
     min_members, membership : social charges (:class:`socialcam.ChargeOptions`).
