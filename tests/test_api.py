@@ -10,7 +10,9 @@ from __future__ import annotations
 import dataclasses
 import inspect
 import math
+import re
 from collections.abc import Callable
+from pathlib import Path
 from typing import Any
 
 import numpy as np
@@ -355,3 +357,32 @@ def test_result_arrays_are_read_only():
             assert not a.flags.writeable, type(r).__name__
     for a in (CAMS.K, CAMS.R, CAMS.C, CAMS.times):
         assert not a.flags.writeable
+
+
+def test_no_reference_to_documents_the_repo_lacks():
+    """Every ``NAME.md`` the code, tests, benches and CI mention is a file of the repository,
+    and nothing points outside it (the development notes are not shipped)."""
+    root = Path(__file__).resolve().parents[1]
+    texts = [root / "README.md", root / "pyproject.toml"]
+    for top in ("python", "tests", "crates", "benches", ".ci", ".github"):
+        texts += [
+            p
+            for p in (root / top).rglob("*")
+            if p.suffix in {".py", ".pyi", ".rs", ".md", ".toml", ".yml", ".txt"}
+            and "data" not in p.relative_to(root).parts
+            and p != Path(__file__).resolve()
+        ]
+    have = {
+        p.name
+        for top in ("python", "tests", "crates", "benches")
+        for p in (root / top).rglob("*.md")
+    }
+    have.add("README.md")
+    problems = []
+    for p in texts:
+        text = p.read_text(errors="replace")
+        for name in set(re.findall(r"\b([\w-]+\.md)\b", text)) - have:
+            problems.append(f"{p.relative_to(root)}: {name}")
+        if "../shared" in text or "/work/" in text:
+            problems.append(f"{p.relative_to(root)}: a path outside the repository")
+    assert not problems, problems

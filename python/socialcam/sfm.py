@@ -439,7 +439,8 @@ class VideoReconstruction:
 
 
 def _silence_glog() -> None:
-    """COLMAP logs thousands of lines through glog (STACK.md): keep warnings and errors."""
+    """COLMAP logs thousands of lines through glog (measured with pycolmap 3.11): keep
+    warnings and errors."""
     import pycolmap
 
     logging = getattr(pycolmap, "logging", None)
