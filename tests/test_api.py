@@ -256,6 +256,54 @@ def test_other_areas_bad_arguments(name):
     assert not problems, "\n".join(problems)
 
 
+def _options_classes() -> list[type]:
+    from socialcam import bodies, faces, sfm
+
+    return [
+        sc.TrajectoryOptions,
+        sc.GazeFieldOptions,
+        sc.ChargeOptions,
+        sc.ArticulatedOptions,
+        sc.BqpOptions,
+        sc.RunOptions,
+        sfm.VideoSfmOptions,
+        faces.FaceOptions,
+        bodies.BodyOptions,
+    ]
+
+
+@pytest.mark.parametrize("cls", _options_classes(), ids=lambda c: c.__name__)
+def test_every_options_field_refuses_bad_values_by_name(cls):
+    """Every field of every options dataclass, with each bad value: a ``ValueError`` naming
+    the field, or a value of the field's type — never a ``TypeError``, a NaN, a truthy
+    number taken for a flag or a fraction taken for a count."""
+    cls()
+    problems = []
+    for f in dataclasses.fields(cls):
+        kind = str(f.type)
+        for bad in BAD:
+            try:
+                got = getattr(cls(**{f.name: bad}), f.name)
+            except ValueError as e:
+                if f.name not in str(e):
+                    problems.append(f"{f.name}={bad!r}: ValueError not naming it: {e}")
+                continue
+            except (KeyboardInterrupt, SystemExit):
+                raise
+            except BaseException as e:
+                problems.append(f"{f.name}={bad!r}: {type(e).__name__}: {e}")
+                continue
+            if isinstance(got, float) and not math.isfinite(got):
+                problems.append(f"{f.name}={bad!r}: accepted a non-finite value")
+            elif kind == "bool" and not isinstance(got, bool | np.bool_):
+                problems.append(f"{f.name}={bad!r}: accepted for a bool")
+            elif bad is True and "bool" not in kind:
+                problems.append(f"{f.name}={bad!r}: a bool accepted for {kind}")
+            elif bad == 2.9 and "float" not in kind and "Any" not in kind:
+                problems.append(f"{f.name}={bad!r}: a fraction accepted for {kind}")
+    assert not problems, "\n".join(problems)
+
+
 # ----------------------------------------------------------------------------- conventions
 
 

@@ -113,6 +113,13 @@ def check_float(
     return v
 
 
+def check_bool(value: object, name: str) -> bool:
+    """A flag: ``True``/``False`` (Python or numpy) only, never a truthy number or string."""
+    if not isinstance(value, (bool, np.bool_)):
+        raise ValueError(f"{name}: expected a bool, got {value!r}")
+    return bool(value)
+
+
 def check_choice(value: object, name: str, choices: Sequence[str]) -> str:
     """A string option from a fixed set."""
     if not isinstance(value, str) or value not in choices:

@@ -29,7 +29,7 @@ from typing import Any
 import numpy as np
 import numpy.typing as npt
 
-from socialcam._validate import FloatArray, check_float, check_int, readonly
+from socialcam._validate import FloatArray, check_bool, check_float, check_int, readonly
 
 IntArray = npt.NDArray[np.int64]
 U8Image = npt.NDArray[np.uint8]
@@ -423,6 +423,12 @@ class FaceOptions:
             check_float(self.sync_tolerance, "sync_tolerance", min=0.0, min_exclusive=True)
         check_int(self.max_gap, "max_gap", min=0)
         check_int(self.refine_iterations, "refine_iterations", min=1, max=100)
+        for name in ("rigid", "single_view"):
+            check_bool(getattr(self, name), name)
+        if not isinstance(self.interocular, (tuple, list)) or len(self.interocular) != 2:
+            raise ValueError(
+                f"interocular: expected a pair (min, max) in metres, got {self.interocular!r}"
+            )
         lo, hi = self.interocular
         if not 0 < check_float(lo, "interocular[0]") < check_float(hi, "interocular[1]"):
             raise ValueError(f"interocular: expected 0 < min < max, got {self.interocular}")
