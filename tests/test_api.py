@@ -397,6 +397,20 @@ def test_result_arrays_are_read_only():
         FIELD,
         sc.cross_validate_gaze(FRAMES, method="rbf"),
         sc.detect_anomalies(FRAMES, FIELD),
+        sc.solve_bqp(np.array([[1.0, -2], [-2, 1]])),
+        sc.reconstruct_articulated(
+            PIX_TRAJ, CAMS, TRAJ - [0.4, 0, 0], 0.4, k=2, refine_k_max=0, node_limit=100
+        ),
+        sc.reconstruct_skeleton(
+            np.stack([PIX_TRAJ, PIX_TRAJ], axis=1),
+            CAMS,
+            sc.Skeleton(["root", "joint"], [-1, 0], [0.0, 0.4]),
+            TRAJ - [0.4, 0, 0],
+            k=2,
+            refine_k_max=0,
+            node_limit=100,
+        ),
+        sc.find_charges(sc.GazeRays(EYES, DIRS, np.full(5, 0.1)))[0],
     ]
     for r in results:
         arrays = _arrays(r)
@@ -434,3 +448,38 @@ def test_no_reference_to_documents_the_repo_lacks():
         if "../shared" in text or "/work/" in text:
             problems.append(f"{p.relative_to(root)}: a path outside the repository")
     assert not problems, problems
+
+
+def test_pose_results_filled_in_place_are_handed_out_read_only():
+    """The per-frame pose quality is filled in place while the poses are checked; the
+    reconstruction and the pose errors hand their arrays out read-only all the same."""
+    from socialcam import sfm
+
+    q = sfm.FrameQuality(
+        times=np.arange(3.0),
+        posed=np.ones(3, bool),
+        keyframe=np.zeros(3, bool),
+        rms=np.ones(3),
+        n_inliers=np.full(3, 50),
+        reasons={},
+    )
+    q.posed[0] = False  # still writable while the reconstruction is being assembled
+    rec = sfm.VideoReconstruction(
+        names=("a",),
+        cameras={},
+        quality={"a": q},
+        points=np.zeros((0, 3)),
+        colors=np.zeros((0, 3), np.uint8),
+        offsets=np.zeros(1),
+        sync={},
+        scale=1.0,
+        unplaced=(),
+        timings={},
+        warnings=(),
+        counts={},
+        out_dir=Path("."),
+    )
+    errors = sfm.PoseErrors(("a",), np.zeros(2, np.int64), np.zeros(2), np.zeros(2), 1.0)
+    for r in (rec.quality["a"], errors):
+        for a in _arrays(r):
+            assert not a.flags.writeable, type(r).__name__

@@ -60,6 +60,15 @@ def readonly(arr: np.ndarray) -> np.ndarray:
     return arr
 
 
+def readonly_fields(obj: object) -> None:
+    """Marks every array field of a dataclass result read-only (for results assembled from
+    parts that were filled in place first)."""
+    for f in dataclasses.fields(obj):  # type: ignore[arg-type]
+        value = getattr(obj, f.name)
+        if isinstance(value, np.ndarray):
+            value.flags.writeable = False
+
+
 # --- scalar options -----------------------------------------------------------------
 # One layer, one style: every public function and every options dataclass checks its
 # scalar arguments with these helpers, so a bad value raises ``ValueError("name: ...")``

@@ -217,12 +217,12 @@ class ArticulatedTrajectory:
 
 def _traj(d: dict[str, Any], times: FloatArray) -> ArticulatedTrajectory:
     return ArticulatedTrajectory(
-        points=d["X"],
-        times=times,
+        points=readonly(d["X"]),
+        times=readonly(times),
         radius=float(d["radius"]),
         bqp_radius=float(d["bqp_radius"]),
-        coeffs_theta=d["coeffs_theta"],
-        coeffs_phi=d["coeffs_phi"],
+        coeffs_theta=readonly(d["coeffs_theta"]),
+        coeffs_phi=readonly(d["coeffs_phi"]),
         bqp_size=int(d["bqp_size"]),
         bqp_nodes=int(d["bqp_nodes"]),
         bqp_optimal=bool(d["bqp_optimal"]),
@@ -601,4 +601,4 @@ def reconstruct_skeleton(
         cameras.K, cameras.R, cameras.C, x_, list(skeleton.parents), lengths, r_, t, opts
     )
     joints = tuple(None if d is None else _traj(d, t) for d in dicts)
-    return SkeletonReconstruction(X, joints)
+    return SkeletonReconstruction(readonly(X), joints)

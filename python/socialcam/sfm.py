@@ -32,6 +32,7 @@ from socialcam._validate import (
     check_int,
     check_seed,
     readonly,
+    readonly_fields,
 )
 from socialcam.camera import COLMAP_TO_OPENCV_PIXEL, Cameras
 from socialcam.io import atomic_write_bytes, write_json
@@ -346,6 +347,12 @@ class VideoReconstruction:
     warnings: tuple[str, ...]
     counts: dict[str, Any]
     out_dir: Path
+
+    def __post_init__(self) -> None:
+        # The per-frame quality is filled in place while the poses are checked; the result
+        # hands it out read-only, like every other result array.
+        for q in self.quality.values():
+            readonly_fields(q)
 
     def to_dict(self) -> dict[str, Any]:
         """Plain JSON-able summary (no per-frame poses)."""
@@ -1622,6 +1629,9 @@ class PoseErrors:
     centre: FloatArray
     rotation: FloatArray
     scale: float
+
+    def __post_init__(self) -> None:
+        readonly_fields(self)
 
     def to_dict(self) -> dict[str, Any]:
         return {
