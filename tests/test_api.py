@@ -11,6 +11,8 @@ import dataclasses
 import inspect
 import math
 import re
+import subprocess
+import sys
 from collections.abc import Callable
 from pathlib import Path
 from typing import Any
@@ -483,3 +485,14 @@ def test_pose_results_filled_in_place_are_handed_out_read_only():
     for r in (rec.quality["a"], errors):
         for a in _arrays(r):
             assert not a.flags.writeable, type(r).__name__
+
+
+def test_import_stays_light():
+    """``import socialcam`` loads numpy and the extension only: the optional extras and the
+    heavy dependencies of single stages are imported by the functions that use them."""
+    heavy = ("scipy", "matplotlib", "cv2", "av", "pycolmap", "PIL", "tqdm", "c3d", "rerun")
+    code = f"import sys, socialcam; print([m for m in {heavy!r} if m in sys.modules])"
+    out = subprocess.run(
+        [sys.executable, "-c", code], capture_output=True, text=True, check=True
+    ).stdout
+    assert out.strip() == "[]", out
