@@ -496,3 +496,32 @@ def test_import_stays_light():
         [sys.executable, "-c", code], capture_output=True, text=True, check=True
     ).stdout
     assert out.strip() == "[]", out
+
+
+def test_angles_are_radians_unless_named_deg():
+    """Angles in the API are radians; a parameter in degrees ends in ``_deg`` (README,
+    Conventions). Checked on the documented fields of every options dataclass and the
+    documented parameters of every public function."""
+    documented: list[tuple[str, str, str]] = []  # (owner, name, its doc line)
+    owners: list[Any] = list(_options_classes())
+    # Functions, not result classes: a result may report in degrees, as the thesis' figures
+    # do (``GazeCrossValidation.errors``, documented so).
+    owners += [getattr(sc, n) for n in sc.__all__ if inspect.isfunction(getattr(sc, n))]
+    for owner in owners:
+        doc = inspect.getdoc(owner) or ""
+        try:
+            names = list(inspect.signature(owner).parameters)
+        except (TypeError, ValueError):
+            continue
+        for name in names:
+            for m in re.finditer(rf"^\s*{name}\b[^:\n]*: (.*)$", doc, re.M):
+                documented.append((getattr(owner, "__name__", str(owner)), name, m.group(1)))
+    assert len(documented) > 100
+    wrong = [
+        f"{o}.{n}: {line}"
+        for o, n, line in documented
+        if re.search(r"\bdegrees\b|°", line.split(";")[0].split("(default")[0])
+        and "radians" not in line
+        and not n.endswith("_deg")
+    ]
+    assert not wrong, wrong

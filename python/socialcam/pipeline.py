@@ -232,12 +232,12 @@ class RunOptions:
     default_h : eye-in-head spread assumed for a wearer without a usable calibration
     max_h : a calibration whose residual spread ``h`` exceeds this (radians) means the
         wearer did not fixate: warn and fall back to the optical axis
-    max_axis_angle : degrees; a calibrated primary direction further than this from the
-        optical axis is implausible for a head-mounted camera: fall back
+    max_axis_angle : radians (default 30°); a calibrated primary direction further than
+        this from the optical axis is implausible for a head-mounted camera: fall back
     max_eye_offset : metres; the same for the eye centre's distance from the camera
     max_depth : metres; the fixated point must lie within this distance of the eye
-    max_v_std : degrees; a calibrated direction with a larger standard error is not
-        determined by the segment: fall back
+    max_v_std : radians (default 2°); a calibrated direction with a larger standard error
+        is not determined by the segment: fall back
     max_p_std : metres; the same for the norm of the eye centre's standard errors
     min_depth_change : the fixation distance must vary by at least this fraction of its
         median during the segment (the back and forth that tells the eye offset from the
@@ -331,10 +331,10 @@ class RunOptions:
     seed: int = 0
     default_h: float = DEFAULT_H
     max_h: float = 0.15
-    max_axis_angle: float = 30.0
+    max_axis_angle: float = 0.5236  # 30°
     max_eye_offset: float = 0.25
     max_depth: float = 10.0
-    max_v_std: float = 2.0
+    max_v_std: float = 0.0349  # 2°
     max_p_std: float = 0.08
     min_depth_change: float = 0.2
     dense_calibration: bool = True
@@ -363,10 +363,10 @@ class RunOptions:
         check_seed(self.seed)
         check_float(self.default_h, "default_h", min=0.0, min_exclusive=True)
         check_float(self.max_h, "max_h", min=0.0, min_exclusive=True)
-        check_float(self.max_axis_angle, "max_axis_angle", min=0.0, max=180.0)
+        check_float(self.max_axis_angle, "max_axis_angle", min=0.0, max=np.pi)
         check_float(self.max_eye_offset, "max_eye_offset", min=0.0)
         check_float(self.max_depth, "max_depth", min=0.0, min_exclusive=True)
-        check_float(self.max_v_std, "max_v_std", min=0.0, min_exclusive=True)
+        check_float(self.max_v_std, "max_v_std", min=0.0, min_exclusive=True, max=np.pi / 2)
         check_float(self.max_p_std, "max_p_std", min=0.0, min_exclusive=True)
         check_float(self.min_depth_change, "min_depth_change", min=0.0)
         check_float(self.max_pose_gap, "max_pose_gap", min=1.0)
@@ -605,10 +605,10 @@ def _calibrate_one(
             f"the wearer did not fixate one point (residual spread h = {cal.h:.3f} > "
             f"max_h = {opts.max_h})"
         )
-    elif axis_deg > opts.max_axis_angle:
+    elif np.radians(axis_deg) > opts.max_axis_angle:
         why = (
             f"implausible gaze direction ({axis_deg:.1f}° from the optical axis > "
-            f"max_axis_angle = {opts.max_axis_angle}°)"
+            f"max_axis_angle = {np.degrees(opts.max_axis_angle):.1f}°)"
         )
     elif unit * float(np.linalg.norm(cal.p)) > opts.max_eye_offset:
         why = (
@@ -627,11 +627,11 @@ def _calibrate_one(
             f"{100 * unit * np.linalg.norm(cal.p_std):.1f} cm > max_p_std = "
             f"{100 * opts.max_p_std:g} cm: move back and forth, not only sideways)"
         )
-    elif np.degrees(cal.v_std) > opts.max_v_std:
+    elif cal.v_std > opts.max_v_std:
         why = (
             f"the segment does not determine the gaze direction (standard error "
-            f"{np.degrees(cal.v_std):.1f}° > max_v_std = {opts.max_v_std}°: move the head "
-            "more, side to side and back and forth, while fixating)"
+            f"{np.degrees(cal.v_std):.1f}° > max_v_std = {np.degrees(opts.max_v_std):.1f}°: "
+            "move the head more, side to side and back and forth, while fixating)"
         )
     elif depth.max() > opts.max_depth:
         why = f"the fixated point is {depth.max():.1f} m away (> max_depth = {opts.max_depth} m)"
