@@ -52,6 +52,16 @@ _v = np.array([0.0, 0.2, 1.0]) - EYES
 DIRS = _v / np.linalg.norm(_v, axis=1, keepdims=True)
 FRAMES = [(EYES, DIRS)] * 4
 FIELD = sc.GazeField.fit(FRAMES, n_charges=1, kappa=30.0)
+#: A bone 0.4 m from a parent moving with the trajectory; small, fast articulated calls.
+PARENT = TRAJ - np.array([0.4, 0.0, 0.0])
+BONE = dict(x=PIX_TRAJ, cameras=CAMS, parent=PARENT, length=0.4)
+LIMB = dict(
+    x=np.stack([PIX_TRAJ, PIX_TRAJ], axis=1),
+    cameras=CAMS,
+    skeleton=sc.Skeleton(["root", "joint"], [-1, 0], [0.0, 0.4]),
+    root=PARENT,
+)
+FAST = dict(k=2, refine_k_max=0, node_limit=100)
 
 # name -> (callable, valid keyword arguments). Every parameter is probed.
 CALLS: dict[str, tuple[Callable[..., Any], dict[str, Any]]] = {
@@ -231,6 +241,69 @@ def test_bad_arguments_raise_value_error_naming_them(name):
     assert not problems, "\n".join(problems)
 
 
+_RAYS = sc.GazeRays(EYES, DIRS, np.full(5, 0.1))
+_SEQ = sc.find_charges_sequence([_RAYS] * 4)
+
+
+def _plot_tracks(**kwargs: Any) -> None:
+    import matplotlib.pyplot as plt
+
+    plt.close(sc.plot_charge_tracks(**kwargs))
+
+
+def _later_calls() -> dict[str, tuple[Callable[..., Any], dict[str, Any]]]:
+    """Public functions added since the first probe (issue 13 asked for the whole class)."""
+    from socialcam import faces, sync, synth
+
+    seg = synth.fixation_segment(60, h=0.01, seed=9)
+    return {
+        "calibrate_gaze": (
+            sc.calibrate_gaze,
+            dict(cameras=seg.cameras, lambda_c=1e-4, lambda_axis=100.0, max_iter=20, tol=1e-12),
+        ),
+        "GazeRays": (sc.GazeRays, dict(p=EYES, v=DIRS, h=0.1, ids=np.arange(5))),
+        "saliency_field": (sc.saliency_field, dict(rays=_RAYS, points=np.zeros((3, 3)))),
+        "find_charges_sequence": (sc.find_charges_sequence, dict(frames=[_RAYS] * 2, seed=0)),
+        "track_charges": (
+            sc.track_charges,
+            dict(
+                charges_per_frame=_SEQ,
+                bandwidth=0.3,
+                max_iter=50,
+                bin_seeding=True,
+                max_gap=2,
+                min_length=2,
+            ),
+        ),
+        "plot_charge_tracks": (
+            _plot_tracks,
+            dict(tracks=sc.track_charges(_SEQ, min_length=2), legend_min_length=2),
+        ),
+        "reconstruct_articulated": (sc.reconstruct_articulated, {**BONE, **FAST}),
+        "articulated_bqp": (sc.articulated_bqp, {**BONE, "k": 2}),
+        "reconstruct_skeleton": (sc.reconstruct_skeleton, {**LIMB, **FAST}),
+        "fuse_ego_exo": (
+            faces.fuse_ego_exo,
+            dict(ego_v=DIRS, ego_h=0.1, exo_v=DIRS, exo_h=0.1),
+        ),
+        "onset_envelope": (
+            sync.onset_envelope,
+            dict(x=np.random.default_rng(0).normal(size=4000), rate=8000),
+        ),
+    }
+
+
+LATER = _later_calls()
+
+
+@pytest.mark.parametrize("name", sorted(LATER))
+def test_later_functions_bad_arguments(name):
+    fn, base = LATER[name]
+    fn(**base)
+    problems = _probe(fn, base)
+    assert not problems, "\n".join(problems)
+
+
 def _probe_result(name: str) -> list[str]:
     fn, base = OTHERS[name]
     try:
@@ -400,18 +473,8 @@ def test_result_arrays_are_read_only():
         sc.cross_validate_gaze(FRAMES, method="rbf"),
         sc.detect_anomalies(FRAMES, FIELD),
         sc.solve_bqp(np.array([[1.0, -2], [-2, 1]])),
-        sc.reconstruct_articulated(
-            PIX_TRAJ, CAMS, TRAJ - [0.4, 0, 0], 0.4, k=2, refine_k_max=0, node_limit=100
-        ),
-        sc.reconstruct_skeleton(
-            np.stack([PIX_TRAJ, PIX_TRAJ], axis=1),
-            CAMS,
-            sc.Skeleton(["root", "joint"], [-1, 0], [0.0, 0.4]),
-            TRAJ - [0.4, 0, 0],
-            k=2,
-            refine_k_max=0,
-            node_limit=100,
-        ),
+        sc.reconstruct_articulated(**BONE, **FAST),
+        sc.reconstruct_skeleton(**LIMB, **FAST),
         sc.find_charges(sc.GazeRays(EYES, DIRS, np.full(5, 0.1)))[0],
     ]
     for r in results:

@@ -4,7 +4,7 @@ from __future__ import annotations
 
 import dataclasses
 from collections.abc import Sequence
-from typing import TypeVar
+from typing import Any, TypeVar
 
 import numpy as np
 import numpy.typing as npt
@@ -127,6 +127,14 @@ def check_bool(value: object, name: str) -> bool:
     if not isinstance(value, (bool, np.bool_)):
         raise ValueError(f"{name}: expected a bool, got {value!r}")
     return bool(value)
+
+
+def check_sequence(value: object, name: str) -> list[Any]:
+    """A sequence argument (frames, tracks, ...) as a list; anything else, a string
+    included, is a ``ValueError`` naming the argument."""
+    if isinstance(value, (str, bytes)) or not isinstance(value, Sequence):
+        raise ValueError(f"{name}: expected a sequence, got {type(value).__name__}")
+    return list(value)
 
 
 def check_choice(value: object, name: str, choices: Sequence[str]) -> str:

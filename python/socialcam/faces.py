@@ -1011,8 +1011,12 @@ def fuse_ego_exo(
 
     a = as_float_array(ego_v, "ego_v", (None, 3))
     b = as_float_array(exo_v, "exo_v", (len(a), 3), allow_nan=True)
-    ha = np.broadcast_to(as_float_array(ego_h, "ego_h"), (len(a),))
-    hb = np.broadcast_to(as_float_array(exo_h, "exo_h", allow_nan=True), (len(a),))
+    ha = as_float_array(ego_h, "ego_h")
+    hb = as_float_array(exo_h, "exo_h", allow_nan=True)
+    for name, h in (("ego_h", ha), ("exo_h", hb)):
+        if h.shape not in ((1,), (len(a),)):
+            raise ValueError(f"{name}: expected a float or shape ({len(a)},), got {h.shape}")
+    ha, hb = np.broadcast_to(ha, (len(a),)), np.broadcast_to(hb, (len(a),))
     if (ha <= 0).any() or (np.nan_to_num(hb, nan=1.0) <= 0).any():
         raise ValueError("ego_h, exo_h: bandwidths must be > 0")
     with np.errstate(invalid="ignore", divide="ignore"):
