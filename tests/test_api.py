@@ -588,3 +588,39 @@ def test_angles_are_radians_unless_named_deg():
         and not n.endswith("_deg")
     ]
     assert not wrong, wrong
+
+
+@pytest.mark.parametrize("entry", ["run", "poses", "reconstruct_videos"])
+def test_video_entry_points_check_arguments_before_touching_files(entry, tmp_path):
+    """``run``, ``poses`` and ``reconstruct_videos`` refuse a bad argument by name before
+    opening a video or creating ``out_dir`` (``out_dir=None`` was a TypeError, ``sync=5``
+    and ``intrinsics=5`` were only noticed after decoding)."""
+    from socialcam import sfm
+
+    videos = [tmp_path / "a.mp4", tmp_path / "b.mp4"]
+    for v in videos:
+        v.write_bytes(b"")  # exists; never opened
+    out = tmp_path / "out"
+    fn = {
+        "run": sc.run,
+        "poses": sc.poses,
+        "reconstruct_videos": lambda videos, out_dir, **kw: sfm.reconstruct_videos(
+            videos, out_dir=out_dir, **kw
+        ),
+    }[entry]
+    cases: dict[str, dict[str, Any]] = {
+        "videos": dict(videos=None),
+        "out_dir": dict(out_dir=None),
+        "sync": dict(sync=5),
+        "intrinsics": dict(intrinsics=5),
+        "known_distance": dict(known_distance=5),
+        "eye_height": dict(eye_height=-1.0),
+        "progress": dict(progress="yes"),
+    }
+    if entry == "run":
+        cases["overwrite"] = dict(overwrite="yes")
+    for name, bad in cases.items():
+        kwargs = {"videos": videos, "out_dir": out, "progress": False, **bad}
+        with pytest.raises(ValueError, match=rf"^{name}:"):
+            fn(**kwargs)
+    assert not out.exists()

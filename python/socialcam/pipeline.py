@@ -26,6 +26,7 @@ from socialcam._validate import (
     FloatArray,
     apply_overrides,
     as_float_array,
+    check_bool,
     check_choice,
     check_float,
     check_int,
@@ -52,6 +53,7 @@ from socialcam.sfm import (
     VideoSfmOptions,
     _options,
     _quat_wxyz,
+    check_video_args,
     pose_segment,
     reconstruct_videos,
 )
@@ -133,6 +135,7 @@ def poses(
     Arguments as :func:`socialcam.sfm.reconstruct_videos`.
     """
     opts = _options(options, {**overrides, "fps": fps})
+    check_video_args(videos, out_dir, sync, intrinsics, known_distance, eye_height, progress)
     out = Path(out_dir)
     out.mkdir(parents=True, exist_ok=True)
     key = _poses_key(videos, opts, sync, intrinsics, known_distance, eye_height)
@@ -934,16 +937,11 @@ def run(
     from tqdm.auto import tqdm  # type: ignore[import-untyped]
 
     opts = apply_overrides(options, RunOptions, overrides)
-    if isinstance(videos, (str, os.PathLike)) or not isinstance(videos, Sequence):
-        raise ValueError("videos: expected a sequence of video paths")
-    if len(videos) == 0:
-        raise ValueError("videos: no video given")
+    check_video_args(videos, out_dir, sync, intrinsics, known_distance, eye_height, progress)
+    check_bool(overwrite, "overwrite")
     names = [Path(p).stem for p in videos]
     if len(set(names)) != len(names):
         raise ValueError(f"videos: two videos have the same file stem (person name): {names}")
-    for p in videos:
-        if not os.path.exists(p):
-            raise ValueError(f"videos: {p} does not exist")
     segments = _parse_segments(calibration, names)
     out = Path(out_dir)
     out.mkdir(parents=True, exist_ok=True)
