@@ -333,7 +333,8 @@ def test_written_files_respect_the_umask(tmp_path, mask):
 
 def test_strict_raises_convergence_error_where_documented():
     """``strict=True`` turns an iteration cap that was hit into the documented
-    :class:`socialcam.ConvergenceError` (a ``RuntimeError``), in both places that offer it."""
+    :class:`socialcam.ConvergenceError` (a ``RuntimeError``), in every place that offers it:
+    the gaze field, triangulation and trajectories (one point and a batch)."""
     frames = gaze_frames(3)
     with pytest.raises(sc.ConvergenceError, match="did not converge in max_iter=1"):
         sc.GazeField.fit(frames, n_charges=2, max_iter=1, strict=True)
@@ -345,4 +346,14 @@ def test_strict_raises_convergence_error_where_documented():
     x = x + rng.normal(scale=2.0, size=x.shape)
     with pytest.raises(sc.ConvergenceError):
         sc.triangulate(x, cams, refine=True, max_iter=1, strict=True)
+    cams = ring(30, seed=4)
+    t = cams.times
+    xt = cams.project_trajectory(np.c_[np.sin(t), np.cos(t), 0.1 * t])
+    xt = xt + rng.normal(scale=2.0, size=xt.shape)
+    with pytest.raises(sc.ConvergenceError, match="max_iter=1"):
+        sc.reconstruct_trajectory(xt, cams, k=4, max_iter=1, strict=True)
+    with pytest.raises(sc.ConvergenceError, match="max_iter=1"):
+        sc.reconstruct_trajectories(xt[None], cams, k=4, max_iter=1, strict=True)
+    assert not sc.reconstruct_trajectory(xt, cams, k=4, max_iter=1).converged
+    assert sc.reconstruct_trajectory(xt, cams, k=4, strict=True).converged
     assert issubclass(sc.ConvergenceError, RuntimeError)
