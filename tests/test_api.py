@@ -394,6 +394,15 @@ def test_every_options_field_refuses_bad_values_by_name(cls):
         (sc.cross_validate_gaze, "leave_out"),
         (sc.detect_anomalies, "threshold"),
         (sc.GazeField.angle_to_charges, "self_radius"),
+        (sc.find_charges, "seed"),
+        (sc.find_charges_sequence, "seed"),
+        (sc.solve_bqp, "options"),
+        (sc.reconstruct_articulated, "options"),
+        (sc.reconstruct_skeleton, "options"),
+        (sc.run, "calibration"),
+        (sc.poses, "fps"),
+        (sc.calibrate_gaze, "lambda_c"),
+        (sc.track_charges, "bandwidth"),
     ],
 )
 def test_options_are_keyword_only(fn, first_option):

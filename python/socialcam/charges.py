@@ -466,8 +466,8 @@ def _run(frames: Sequence[GazeRays], seed: int, options: ChargeOptions) -> list[
 
 def find_charges(
     rays: GazeRays,
-    seed: int = 0,
     *,
+    seed: int = 0,
     options: ChargeOptions | None = None,
     **overrides: Any,
 ) -> list[Charge]:
@@ -503,8 +503,8 @@ def find_charges(
 
 def find_charges_sequence(
     frames: Sequence[GazeRays],
-    seed: int = 0,
     *,
+    seed: int = 0,
     options: ChargeOptions | None = None,
     **overrides: Any,
 ) -> list[list[Charge]]:
@@ -519,7 +519,7 @@ def find_charges_sequence(
     charges of all frames jointly: sources persist, people change target rarely (``switch_cost``), and a
     frame is read with its neighbours; people are followed over frames by their ``ids``.
     With ``pool_frames=0`` (or another rule) frame ``t`` of the
-    result equals ``find_charges(frames[t], seed, ...)``. Each :class:`Charge` has
+    result equals ``find_charges(frames[t], seed=seed, ...)``. Each :class:`Charge` has
     ``frame = t``. ``options`` and ``overrides`` as for :func:`find_charges`.
     """
     opts = _options(options, overrides)

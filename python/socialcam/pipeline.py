@@ -51,9 +51,9 @@ from socialcam.sfm import (
     VideoPosesWarning,
     VideoReconstruction,
     VideoSfmOptions,
+    _check_video_args,
     _options,
     _quat_wxyz,
-    check_video_args,
     pose_segment,
     reconstruct_videos,
 )
@@ -135,7 +135,7 @@ def poses(
     Arguments as :func:`socialcam.sfm.reconstruct_videos`.
     """
     opts = _options(options, {**overrides, "fps": fps})
-    check_video_args(videos, out_dir, sync, intrinsics, known_distance, eye_height, progress)
+    _check_video_args(videos, out_dir, sync, intrinsics, known_distance, eye_height, progress)
     out = Path(out_dir)
     out.mkdir(parents=True, exist_ok=True)
     key = _poses_key(videos, opts, sync, intrinsics, known_distance, eye_height)
@@ -937,7 +937,7 @@ def run(
     from tqdm.auto import tqdm  # type: ignore[import-untyped]
 
     opts = apply_overrides(options, RunOptions, overrides)
-    check_video_args(videos, out_dir, sync, intrinsics, known_distance, eye_height, progress)
+    _check_video_args(videos, out_dir, sync, intrinsics, known_distance, eye_height, progress)
     check_bool(overwrite, "overwrite")
     names = [Path(p).stem for p in videos]
     if len(set(names)) != len(names):
@@ -1310,7 +1310,7 @@ def _find_charges(
     present = [k for k, f in enumerate(frames) if f is not None]
     found = find_charges_sequence(
         [frames[k] for k in present],  # type: ignore[misc]
-        opts.seed,
+        seed=opts.seed,
         member_sigma=opts.member_sigma,
         pair_candidates=opts.pair_bridge > 0,
         min_member_depth=opts.min_charge_depth,

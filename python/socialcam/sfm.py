@@ -768,7 +768,7 @@ def _neighbour_outliers(
     return bad
 
 
-def check_video_args(
+def _check_video_args(
     videos: object,
     out_dir: object = "",
     sync: object = None,
@@ -878,7 +878,7 @@ def reconstruct_videos(
     from socialcam.video import open_video
 
     opts = _options(options, overrides)
-    videos, known_distance, eye_height = check_video_args(
+    videos, known_distance, eye_height = _check_video_args(
         videos, out_dir, sync, intrinsics, known_distance, eye_height, progress
     )
     _silence_glog()
