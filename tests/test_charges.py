@@ -170,7 +170,7 @@ def test_ctrl_c_stops_long_calls(what):
         timer.cancel()
     assert time.perf_counter() - t0 < 5.0
     # The interrupt is cleared: the next call works.
-    assert len(sc.find_charges(frames[0], seeds_per_ray=2)) >= 0
+    assert len(sc.find_charges(frames[0], seeds_per_ray=2)) >= 1  # 2 groups there
 
 
 # ---------------------------------------------------------------- field

@@ -6,6 +6,8 @@ from __future__ import annotations
 import os
 import signal
 import stat
+import subprocess
+import sys
 import threading
 import time
 from collections.abc import Callable
@@ -16,7 +18,7 @@ import pytest
 from _scenes import ring
 
 import socialcam as sc
-from socialcam import _core, io
+from socialcam import _core, io, synth
 
 # ----------------------------------------------------------------------------- helpers
 
@@ -175,6 +177,63 @@ def test_ctrl_c_stops_gaze_field_fit():
     assert lat < LATENCY
 
 
+def test_ctrl_c_stops_articulated_reconstruction():
+    """The articulated method (thesis Ch. 4) polls between its BQP solves, starts and
+    refinements: 300 frames with the robust method run for minutes (measured > 300 s,
+    loaded); Ctrl-C stops them."""
+    f = 300
+    cams = synth.random_photographers(f, seed=1)
+    t = cams.times
+    parent = np.c_[np.zeros(f), np.zeros(f), np.ones(f)]
+    a, b = np.sin(3 * t), np.cos(2 * t)
+    child = parent + 0.4 * np.c_[np.cos(a) * np.cos(b), np.sin(a) * np.cos(b), np.sin(b)]
+    x = cams.project_trajectory(child) + np.random.default_rng(0).normal(size=(f, 2))
+    lat = interrupted(
+        lambda: sc.reconstruct_articulated(x, cams, parent, 0.4, k=8, node_limit=100), delay=1.0
+    )
+    assert lat < LATENCY
+
+
+#: A pipeline run interrupted in pycolmap's matching took 2.7 s to stop (loaded machine):
+#: pycolmap polls for signals itself, less often than the core.
+RUN_LATENCY = 6.0
+
+
+@pytest.mark.parametrize("delay", [3.0, 8.0])
+def test_ctrl_c_stops_a_pipeline_run(small_scene, tmp_path, delay):
+    """``socialcam.run`` (decoding, features, matching, mapping, gaze, charges, plots) stops
+    on Ctrl-C at any stage. In a child process, so that an import the signal lands in
+    cannot leave half-imported modules behind for the other tests."""
+    code = (
+        "import signal, sys\n"
+        "signal.signal(signal.SIGINT, signal.default_int_handler)\n"
+        "import socialcam as sc\n"
+        "print('ready', flush=True)\n"
+        "sc.run(sys.argv[1:-1], sys.argv[-1], progress=False)\n"
+        "print('finished', flush=True)\n"
+    )
+    args = [str(v) for v in small_scene.videos] + [str(tmp_path / "out")]
+    proc = subprocess.Popen(
+        [sys.executable, "-c", code, *args],
+        stdout=subprocess.PIPE,
+        stderr=subprocess.PIPE,
+        text=True,
+    )
+    try:
+        assert proc.stdout is not None and proc.stdout.readline().strip() == "ready"
+        time.sleep(delay)
+        proc.send_signal(signal.SIGINT)
+        sent = time.perf_counter()
+        out, err = proc.communicate(timeout=60)
+        latency = time.perf_counter() - sent
+    finally:
+        if proc.poll() is None:
+            proc.kill()
+    assert "finished" not in out, "the run ended before the interrupt: make it longer"
+    assert "KeyboardInterrupt" in err, err[-2000:]
+    assert latency < RUN_LATENCY, latency
+
+
 # ----------------------------------------------------------------------------- silent wrong answers
 
 
@@ -274,7 +333,8 @@ def test_written_files_respect_the_umask(tmp_path, mask):
 
 def test_strict_raises_convergence_error_where_documented():
     """``strict=True`` turns an iteration cap that was hit into the documented
-    :class:`socialcam.ConvergenceError` (a ``RuntimeError``), in both places that offer it."""
+    :class:`socialcam.ConvergenceError` (a ``RuntimeError``), in every place that offers it:
+    the gaze field, triangulation and trajectories (one point and a batch)."""
     frames = gaze_frames(3)
     with pytest.raises(sc.ConvergenceError, match="did not converge in max_iter=1"):
         sc.GazeField.fit(frames, n_charges=2, max_iter=1, strict=True)
@@ -286,4 +346,14 @@ def test_strict_raises_convergence_error_where_documented():
     x = x + rng.normal(scale=2.0, size=x.shape)
     with pytest.raises(sc.ConvergenceError):
         sc.triangulate(x, cams, refine=True, max_iter=1, strict=True)
+    cams = ring(30, seed=4)
+    t = cams.times
+    xt = cams.project_trajectory(np.c_[np.sin(t), np.cos(t), 0.1 * t])
+    xt = xt + rng.normal(scale=2.0, size=xt.shape)
+    with pytest.raises(sc.ConvergenceError, match="max_iter=1"):
+        sc.reconstruct_trajectory(xt, cams, k=4, max_iter=1, strict=True)
+    with pytest.raises(sc.ConvergenceError, match="max_iter=1"):
+        sc.reconstruct_trajectories(xt[None], cams, k=4, max_iter=1, strict=True)
+    assert not sc.reconstruct_trajectory(xt, cams, k=4, max_iter=1).converged
+    assert sc.reconstruct_trajectory(xt, cams, k=4, strict=True).converged
     assert issubclass(sc.ConvergenceError, RuntimeError)

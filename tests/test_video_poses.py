@@ -50,7 +50,8 @@ def _manual(truth) -> dict[str, float]:
 @pytest.fixture(scope="module")
 def no_vocab_tree():
     """Every pycolmap entry point of the vocabulary tree / loop detection raises: they
-    abort the process without a local tree (STACK.md) and must never be reached."""
+    abort the process without a local tree file (a C++ check failure in pycolmap 3.11,
+    without internet) and must never be reached."""
     import pycolmap
 
     mp = pytest.MonkeyPatch()

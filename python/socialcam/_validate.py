@@ -4,7 +4,7 @@ from __future__ import annotations
 
 import dataclasses
 from collections.abc import Sequence
-from typing import TypeVar
+from typing import Any, TypeVar
 
 import numpy as np
 import numpy.typing as npt
@@ -60,6 +60,15 @@ def readonly(arr: np.ndarray) -> np.ndarray:
     return arr
 
 
+def readonly_fields(obj: object) -> None:
+    """Marks every array field of a dataclass result read-only (for results assembled from
+    parts that were filled in place first)."""
+    for f in dataclasses.fields(obj):  # type: ignore[arg-type]
+        value = getattr(obj, f.name)
+        if isinstance(value, np.ndarray):
+            value.flags.writeable = False
+
+
 # --- scalar options -----------------------------------------------------------------
 # One layer, one style: every public function and every options dataclass checks its
 # scalar arguments with these helpers, so a bad value raises ``ValueError("name: ...")``
@@ -111,6 +120,21 @@ def check_float(
     if max is not None and v > max:
         raise ValueError(f"{name}: expected a number ≤ {max}, got {v}")
     return v
+
+
+def check_bool(value: object, name: str) -> bool:
+    """A flag: ``True``/``False`` (Python or numpy) only, never a truthy number or string."""
+    if not isinstance(value, (bool, np.bool_)):
+        raise ValueError(f"{name}: expected a bool, got {value!r}")
+    return bool(value)
+
+
+def check_sequence(value: object, name: str) -> list[Any]:
+    """A sequence argument (frames, tracks, ...) as a list; anything else, a string
+    included, is a ``ValueError`` naming the argument."""
+    if isinstance(value, (str, bytes)) or not isinstance(value, Sequence):
+        raise ValueError(f"{name}: expected a sequence, got {type(value).__name__}")
+    return list(value)
 
 
 def check_choice(value: object, name: str, choices: Sequence[str]) -> str:

@@ -217,12 +217,12 @@ class ArticulatedTrajectory:
 
 def _traj(d: dict[str, Any], times: FloatArray) -> ArticulatedTrajectory:
     return ArticulatedTrajectory(
-        points=d["X"],
-        times=times,
+        points=readonly(d["X"]),
+        times=readonly(times),
         radius=float(d["radius"]),
         bqp_radius=float(d["bqp_radius"]),
-        coeffs_theta=d["coeffs_theta"],
-        coeffs_phi=d["coeffs_phi"],
+        coeffs_theta=readonly(d["coeffs_theta"]),
+        coeffs_phi=readonly(d["coeffs_phi"]),
         bqp_size=int(d["bqp_size"]),
         bqp_nodes=int(d["bqp_nodes"]),
         bqp_optimal=bool(d["bqp_optimal"]),
@@ -231,6 +231,12 @@ def _traj(d: dict[str, Any], times: FloatArray) -> ArticulatedTrajectory:
         rms=float(d["reprojection_rms"]),
         converged=bool(d["converged"]),
     )
+
+
+def _check_cameras(cameras: object) -> Cameras:
+    if not isinstance(cameras, Cameras):
+        raise ValueError(f"cameras: expected a socialcam.Cameras, got {type(cameras).__name__}")
+    return cameras
 
 
 def _times(cameras: Cameras) -> FloatArray:
@@ -383,7 +389,7 @@ def reconstruct_articulated(
         Fewer observed frames than ``k``.
     """
     opts = _options(options, overrides)
-    f = len(cameras)
+    f = len(_check_cameras(cameras))
     x_ = as_float_array(x, "x", (f, 2), allow_nan=True)
     p_ = as_float_array(parent, "parent", (f, 3))
     length_ = check_float(length, "length", min=0.0, min_exclusive=True)
@@ -398,11 +404,13 @@ def articulated_bqp(
     """The binary program of Eq 4.12 for one joint: ``(Q (n,n), c (n,), constant)`` with
     ``n`` the number of observed frames whose ray has two distinct intersections; the
     smoothness cost of a choice ``b`` is ``bᵀQb + cᵀb + constant``."""
-    f = len(cameras)
+    f = len(_check_cameras(cameras))
     x_ = as_float_array(x, "x", (f, 2), allow_nan=True)
     p_ = as_float_array(parent, "parent", (f, 3))
+    length_ = check_float(length, "length", min=0.0, min_exclusive=True)
+    k_ = check_int(k, "k", min=1, max=f)
     return _core.articulated_bqp(
-        cameras.K, cameras.R, cameras.C, x_, p_, _times(cameras), float(length), int(k)
+        cameras.K, cameras.R, cameras.C, x_, p_, _times(cameras), length_, k_
     )
 
 
@@ -420,9 +428,7 @@ def articulated_reconstructability(
     of Eq 4.12). ``η_a ≫ 1``: the smooth truth is separable from its impostor and the
     reconstruction is accurate; ``η_a < 1``: the impostor is smoother and wins.
     """
-    if not isinstance(cameras, Cameras):
-        raise ValueError(f"cameras: expected a socialcam.Cameras, got {type(cameras).__name__}")
-    f = len(cameras)
+    f = len(_check_cameras(cameras))
     p_ = as_float_array(parent, "parent", (f, 3))
     c_ = as_float_array(child, "child", (f, 3))
     k = check_int(k, "k", min=1, max=f)
@@ -591,7 +597,9 @@ def reconstruct_skeleton(
     options, overrides : as in :func:`reconstruct_articulated`, for every joint.
     """
     opts = _options(options, overrides)
-    f = len(cameras)
+    f = len(_check_cameras(cameras))
+    if not isinstance(skeleton, Skeleton):
+        raise ValueError(f"skeleton: expected a socialcam.Skeleton, got {type(skeleton).__name__}")
     j = len(skeleton.parents)
     x_ = as_float_array(x, "x", (f, j, 2), allow_nan=True)
     r_ = as_float_array(root, "root", (f, 3))
@@ -601,4 +609,4 @@ def reconstruct_skeleton(
         cameras.K, cameras.R, cameras.C, x_, list(skeleton.parents), lengths, r_, t, opts
     )
     joints = tuple(None if d is None else _traj(d, t) for d in dicts)
-    return SkeletonReconstruction(X, joints)
+    return SkeletonReconstruction(readonly(X), joints)

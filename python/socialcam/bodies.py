@@ -23,7 +23,14 @@ from typing import Any
 import numpy as np
 import numpy.typing as npt
 
-from socialcam._validate import FloatArray, as_float_array, check_float, check_int, readonly
+from socialcam._validate import (
+    FloatArray,
+    as_float_array,
+    check_bool,
+    check_float,
+    check_int,
+    readonly,
+)
 
 #: EXIF tags (Exif IFD): DateTimeOriginal, SubSecTimeOriginal, OffsetTimeOriginal
 _DATETIME, _SUBSEC, _OFFSET = 0x9003, 0x9291, 0x9011
@@ -140,6 +147,7 @@ class BodyOptions:
         check_int(self.folds, "folds", min=2)
         check_float(self.pair_ratio, "pair_ratio", min=0.0, max=1.0)
         check_int(self.k_max, "k_max", min=1)
+        check_bool(self.repair_swaps, "repair_swaps")
 
 
 @dataclass(frozen=True)

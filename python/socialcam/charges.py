@@ -30,6 +30,7 @@ from socialcam._validate import (
     check_float,
     check_int,
     check_seed,
+    check_sequence,
     readonly,
 )
 
@@ -81,10 +82,8 @@ class GazeRays:
                 f"v: direction {i} has norm {norms[i]:.6g}; directions must be unit "
                 "(pass normalize=True to scale them)"
             )
-        h = np.asarray(self.h, dtype=np.float64)
-        if h.ndim == 0:
-            h = np.full(n, float(h))
-        h = as_float_array(h, "h", (n,))
+        # A scalar is every ray's bandwidth.
+        h = as_float_array([self.h] * n if np.ndim(self.h) == 0 else self.h, "h", (n,))
         if (h <= 0).any():
             raise ValueError(f"h: bandwidths must be > 0, got {h[h <= 0][0]!r}")
         if self.ids is None:
@@ -467,8 +466,8 @@ def _run(frames: Sequence[GazeRays], seed: int, options: ChargeOptions) -> list[
 
 def find_charges(
     rays: GazeRays,
-    seed: int = 0,
     *,
+    seed: int = 0,
     options: ChargeOptions | None = None,
     **overrides: Any,
 ) -> list[Charge]:
@@ -504,8 +503,8 @@ def find_charges(
 
 def find_charges_sequence(
     frames: Sequence[GazeRays],
-    seed: int = 0,
     *,
+    seed: int = 0,
     options: ChargeOptions | None = None,
     **overrides: Any,
 ) -> list[list[Charge]]:
@@ -520,11 +519,11 @@ def find_charges_sequence(
     charges of all frames jointly: sources persist, people change target rarely (``switch_cost``), and a
     frame is read with its neighbours; people are followed over frames by their ``ids``.
     With ``pool_frames=0`` (or another rule) frame ``t`` of the
-    result equals ``find_charges(frames[t], seed, ...)``. Each :class:`Charge` has
+    result equals ``find_charges(frames[t], seed=seed, ...)``. Each :class:`Charge` has
     ``frame = t``. ``options`` and ``overrides`` as for :func:`find_charges`.
     """
     opts = _options(options, overrides)
-    fr = [_rays(f) for f in frames]
+    fr = [_rays(f, f"frames[{i}]") for i, f in enumerate(check_sequence(frames, "frames"))]
     return _run(fr, seed, opts)
 
 
@@ -610,7 +609,15 @@ def track_charges(
     length = check_int(min_length, "min_length", min=1)
     if not isinstance(bin_seeding, (bool, np.bool_)):
         raise ValueError(f"bin_seeding: expected True or False, got {bin_seeding!r}")
-    flat = [(t, c) for t, cs in enumerate(charges_per_frame) for c in cs]
+    per_frame = check_sequence(charges_per_frame, "charges_per_frame")
+    flat = [
+        (t, c)
+        for t, cs in enumerate(per_frame)
+        for c in check_sequence(cs, f"charges_per_frame[{t}]")
+    ]
+    for t, c in flat:
+        if not isinstance(c, Charge):
+            raise ValueError(f"charges_per_frame[{t}]: expected Charge objects, got {c!r}")
     if not flat:
         return []
     people = np.unique(np.concatenate([c.ids for _, c in flat]))
@@ -747,6 +754,9 @@ def plot_charge_tracks(
     import matplotlib.pyplot as plt
 
     n_min = check_int(legend_min_length, "legend_min_length", min=1)
+    tracks = check_sequence(tracks, "tracks")
+    if not all(isinstance(tr, ChargeTrack) for tr in tracks):
+        raise ValueError("tracks: expected ChargeTrack objects (from track_charges)")
     fig, axs = plt.subplots(1, 4, figsize=(17, 4.2), layout="constrained")
     cmap = plt.get_cmap("tab10")
     tt = None if times is None else as_float_array(times, "times", (None,))

@@ -29,7 +29,7 @@ from typing import Any
 import numpy as np
 import numpy.typing as npt
 
-from socialcam._validate import FloatArray, check_float, check_int, readonly
+from socialcam._validate import FloatArray, check_bool, check_float, check_int, readonly
 
 IntArray = npt.NDArray[np.int64]
 U8Image = npt.NDArray[np.uint8]
@@ -442,6 +442,12 @@ class FaceOptions:
             check_float(self.sync_tolerance, "sync_tolerance", min=0.0, min_exclusive=True)
         check_int(self.max_gap, "max_gap", min=0)
         check_int(self.refine_iterations, "refine_iterations", min=1, max=100)
+        for name in ("rigid", "single_view"):
+            check_bool(getattr(self, name), name)
+        if not isinstance(self.interocular, (tuple, list)) or len(self.interocular) != 2:
+            raise ValueError(
+                f"interocular: expected a pair (min, max) in metres, got {self.interocular!r}"
+            )
         lo, hi = self.interocular
         if not 0 < check_float(lo, "interocular[0]") < check_float(hi, "interocular[1]"):
             raise ValueError(f"interocular: expected 0 < min < max, got {self.interocular}")
@@ -1130,8 +1136,12 @@ def fuse_ego_exo(
 
     a = as_float_array(ego_v, "ego_v", (None, 3))
     b = as_float_array(exo_v, "exo_v", (len(a), 3), allow_nan=True)
-    ha = np.broadcast_to(as_float_array(ego_h, "ego_h"), (len(a),))
-    hb = np.broadcast_to(as_float_array(exo_h, "exo_h", allow_nan=True), (len(a),))
+    ha = as_float_array(ego_h, "ego_h")
+    hb = as_float_array(exo_h, "exo_h", allow_nan=True)
+    for name, h in (("ego_h", ha), ("exo_h", hb)):
+        if h.shape not in ((1,), (len(a),)):
+            raise ValueError(f"{name}: expected a float or shape ({len(a)},), got {h.shape}")
+    ha, hb = np.broadcast_to(ha, (len(a),)), np.broadcast_to(hb, (len(a),))
     if (ha <= 0).any() or (np.nan_to_num(hb, nan=1.0) <= 0).any():
         raise ValueError("ego_h, exo_h: bandwidths must be > 0")
     with np.errstate(invalid="ignore", divide="ignore"):

@@ -630,7 +630,7 @@ def _charges_from_chapter6(
     idx = [k for k, (p, _, _, _) in enumerate(parts) if len(p)]
     rays = [GazeRays(*parts[k]) for k in idx]
     options = {"membership": "strongest", **options}
-    found = find_charges_sequence(rays, seed, **options) if idx else []
+    found = find_charges_sequence(rays, seed=seed, **options) if idx else []
     counts = np.zeros(flat.n_frames, dtype=np.int64)
     cmax = max((len(c) for c in found), default=0)
     cand = np.full((flat.n_frames, max(cmax, 1), 3), np.nan)

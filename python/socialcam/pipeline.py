@@ -26,6 +26,7 @@ from socialcam._validate import (
     FloatArray,
     apply_overrides,
     as_float_array,
+    check_bool,
     check_choice,
     check_float,
     check_int,
@@ -51,6 +52,7 @@ from socialcam.sfm import (
     VideoPosesWarning,
     VideoReconstruction,
     VideoSfmOptions,
+    _check_video_args,
     _options,
     _quat_wxyz,
     pose_segment,
@@ -134,6 +136,7 @@ def poses(
     Arguments as :func:`socialcam.sfm.reconstruct_videos`.
     """
     opts = _options(options, {**overrides, "fps": fps})
+    _check_video_args(videos, out_dir, sync, intrinsics, known_distance, eye_height, progress)
     out = Path(out_dir)
     out.mkdir(parents=True, exist_ok=True)
     key = _poses_key(videos, opts, sync, intrinsics, known_distance, eye_height)
@@ -233,12 +236,12 @@ class RunOptions:
     default_h : eye-in-head spread assumed for a wearer without a usable calibration
     max_h : a calibration whose residual spread ``h`` exceeds this (radians) means the
         wearer did not fixate: warn and fall back to the optical axis
-    max_axis_angle : degrees; a calibrated primary direction further than this from the
-        optical axis is implausible for a head-mounted camera: fall back
+    max_axis_angle : radians (default 30°); a calibrated primary direction further than
+        this from the optical axis is implausible for a head-mounted camera: fall back
     max_eye_offset : metres; the same for the eye centre's distance from the camera
     max_depth : metres; the fixated point must lie within this distance of the eye
-    max_v_std : degrees; a calibrated direction with a larger standard error is not
-        determined by the segment: fall back
+    max_v_std : radians (default 2°); a calibrated direction with a larger standard error
+        is not determined by the segment: fall back
     max_p_std : metres; the same for the norm of the eye centre's standard errors
     min_depth_change : the fixation distance must vary by at least this fraction of its
         median during the segment (the back and forth that tells the eye offset from the
@@ -356,10 +359,10 @@ class RunOptions:
     seed: int = 0
     default_h: float = DEFAULT_H
     max_h: float = 0.15
-    max_axis_angle: float = 30.0
+    max_axis_angle: float = 0.5236  # 30°
     max_eye_offset: float = 0.25
     max_depth: float = 10.0
-    max_v_std: float = 2.0
+    max_v_std: float = 0.0349  # 2°
     max_p_std: float = 0.08
     min_depth_change: float = 0.2
     dense_calibration: bool = True
@@ -388,10 +391,10 @@ class RunOptions:
         check_seed(self.seed)
         check_float(self.default_h, "default_h", min=0.0, min_exclusive=True)
         check_float(self.max_h, "max_h", min=0.0, min_exclusive=True)
-        check_float(self.max_axis_angle, "max_axis_angle", min=0.0, max=180.0)
+        check_float(self.max_axis_angle, "max_axis_angle", min=0.0, max=np.pi)
         check_float(self.max_eye_offset, "max_eye_offset", min=0.0)
         check_float(self.max_depth, "max_depth", min=0.0, min_exclusive=True)
-        check_float(self.max_v_std, "max_v_std", min=0.0, min_exclusive=True)
+        check_float(self.max_v_std, "max_v_std", min=0.0, min_exclusive=True, max=np.pi / 2)
         check_float(self.max_p_std, "max_p_std", min=0.0, min_exclusive=True)
         check_float(self.min_depth_change, "min_depth_change", min=0.0)
         check_float(self.max_pose_gap, "max_pose_gap", min=1.0)
@@ -630,10 +633,10 @@ def _calibrate_one(
             f"the wearer did not fixate one point (residual spread h = {cal.h:.3f} > "
             f"max_h = {opts.max_h})"
         )
-    elif axis_deg > opts.max_axis_angle:
+    elif np.radians(axis_deg) > opts.max_axis_angle:
         why = (
             f"implausible gaze direction ({axis_deg:.1f}° from the optical axis > "
-            f"max_axis_angle = {opts.max_axis_angle}°)"
+            f"max_axis_angle = {np.degrees(opts.max_axis_angle):.1f}°)"
         )
     elif unit * float(np.linalg.norm(cal.p)) > opts.max_eye_offset:
         why = (
@@ -652,11 +655,11 @@ def _calibrate_one(
             f"{100 * unit * np.linalg.norm(cal.p_std):.1f} cm > max_p_std = "
             f"{100 * opts.max_p_std:g} cm: move back and forth, not only sideways)"
         )
-    elif np.degrees(cal.v_std) > opts.max_v_std:
+    elif cal.v_std > opts.max_v_std:
         why = (
             f"the segment does not determine the gaze direction (standard error "
-            f"{np.degrees(cal.v_std):.1f}° > max_v_std = {opts.max_v_std}°: move the head "
-            "more, side to side and back and forth, while fixating)"
+            f"{np.degrees(cal.v_std):.1f}° > max_v_std = {np.degrees(opts.max_v_std):.1f}°: "
+            "move the head more, side to side and back and forth, while fixating)"
         )
     elif depth.max() > opts.max_depth:
         why = f"the fixated point is {depth.max():.1f} m away (> max_depth = {opts.max_depth} m)"
@@ -959,16 +962,11 @@ def run(
     from tqdm.auto import tqdm  # type: ignore[import-untyped]
 
     opts = apply_overrides(options, RunOptions, overrides)
-    if isinstance(videos, (str, os.PathLike)) or not isinstance(videos, Sequence):
-        raise ValueError("videos: expected a sequence of video paths")
-    if len(videos) == 0:
-        raise ValueError("videos: no video given")
+    _check_video_args(videos, out_dir, sync, intrinsics, known_distance, eye_height, progress)
+    check_bool(overwrite, "overwrite")
     names = [Path(p).stem for p in videos]
     if len(set(names)) != len(names):
         raise ValueError(f"videos: two videos have the same file stem (person name): {names}")
-    for p in videos:
-        if not os.path.exists(p):
-            raise ValueError(f"videos: {p} does not exist")
     segments = _parse_segments(calibration, names)
     out = Path(out_dir)
     out.mkdir(parents=True, exist_ok=True)
@@ -1337,7 +1335,7 @@ def _find_charges(
     present = [k for k, f in enumerate(frames) if f is not None]
     found = find_charges_sequence(
         [frames[k] for k in present],  # type: ignore[misc]
-        opts.seed,
+        seed=opts.seed,
         member_sigma=opts.member_sigma,
         pair_candidates=opts.pair_bridge > 0,
         min_member_depth=opts.min_charge_depth,

@@ -27,11 +27,13 @@ from socialcam._posetrack import _LK_VIDEO_RATE, KeyframeSelector
 from socialcam._validate import (
     FloatArray,
     as_float_array,
+    check_bool,
     check_choice,
     check_float,
     check_int,
     check_seed,
     readonly,
+    readonly_fields,
 )
 from socialcam.camera import COLMAP_TO_OPENCV_PIXEL, Cameras
 from socialcam.io import atomic_write_bytes, write_json
@@ -347,6 +349,12 @@ class VideoReconstruction:
     counts: dict[str, Any]
     out_dir: Path
 
+    def __post_init__(self) -> None:
+        # The per-frame quality is filled in place while the poses are checked; the result
+        # hands it out read-only, like every other result array.
+        for q in self.quality.values():
+            readonly_fields(q)
+
     def to_dict(self) -> dict[str, Any]:
         """Plain JSON-able summary (no per-frame poses)."""
         n = sum(len(q.times) for q in self.quality.values())
@@ -439,7 +447,8 @@ class VideoReconstruction:
 
 
 def _silence_glog() -> None:
-    """COLMAP logs thousands of lines through glog (STACK.md): keep warnings and errors."""
+    """COLMAP logs thousands of lines through glog (measured with pycolmap 3.11): keep
+    warnings and errors."""
     import pycolmap
 
     logging = getattr(pycolmap, "logging", None)
@@ -759,6 +768,56 @@ def _neighbour_outliers(
     return bad
 
 
+def _check_video_args(
+    videos: object,
+    out_dir: object = "",
+    sync: object = None,
+    intrinsics: object = None,
+    known_distance: object = None,
+    eye_height: object = None,
+    progress: object = True,
+) -> tuple[list[str | os.PathLike[str]], KnownDistance | None, float | None]:
+    """The arguments :func:`reconstruct_videos`, :func:`socialcam.poses` and
+    :func:`socialcam.run` share, checked before any file is opened or written: ``videos``
+    as a list of existing paths, ``known_distance`` as a :class:`KnownDistance` and
+    ``eye_height`` as a float; the others by type. A ``ValueError`` names the argument."""
+    if isinstance(videos, (str, os.PathLike)) or not isinstance(videos, Sequence):
+        raise ValueError("videos: expected a sequence of video paths")
+    if len(videos) == 0:
+        raise ValueError("videos: no video given")
+    for p in videos:
+        if not isinstance(p, (str, os.PathLike)):
+            raise ValueError(f"videos: expected paths, got {p!r}")
+        if not os.path.exists(p):
+            raise ValueError(f"videos: {p} does not exist")
+    if not isinstance(out_dir, (str, os.PathLike)):
+        raise ValueError(f"out_dir: expected a path, got {type(out_dir).__name__}")
+    if not (sync is None or isinstance(sync, Mapping) or hasattr(sync, "offsets")):
+        raise ValueError(
+            f"sync: expected None, a SyncResult or a mapping name → offset, got {type(sync).__name__}"
+        )
+    if not (
+        intrinsics is None
+        or isinstance(intrinsics, Mapping)
+        or (isinstance(intrinsics, Sequence) and not isinstance(intrinsics, (str, bytes)))
+    ):
+        raise ValueError(
+            "intrinsics: expected None, one (K, dist) per video or a mapping name → (K, dist), "
+            f"got {type(intrinsics).__name__}"
+        )
+    if known_distance is not None and not isinstance(known_distance, KnownDistance):
+        try:
+            known_distance = KnownDistance(*known_distance)  # type: ignore[misc]
+        except TypeError:
+            raise ValueError(
+                "known_distance: expected KnownDistance(person_a, time_a, person_b, time_b, metres)"
+            ) from None
+    if eye_height is not None:
+        eye_height = check_float(eye_height, "eye_height", min=0.0, min_exclusive=True)
+    check_bool(progress, "progress")
+    return list(videos), known_distance, eye_height  # type: ignore[return-value]
+
+
 def reconstruct_videos(
     videos: Sequence[str | os.PathLike[str]],
     *,
@@ -819,19 +878,9 @@ def reconstruct_videos(
     from socialcam.video import open_video
 
     opts = _options(options, overrides)
-    if isinstance(videos, (str, os.PathLike)) or not isinstance(videos, Sequence):
-        raise ValueError("videos: expected a sequence of video paths")
-    if len(videos) == 0:
-        raise ValueError("videos: no video given")
-    if known_distance is not None and not isinstance(known_distance, KnownDistance):
-        try:
-            known_distance = KnownDistance(*known_distance)
-        except TypeError:
-            raise ValueError(
-                "known_distance: expected KnownDistance(person_a, time_a, person_b, time_b, metres)"
-            ) from None
-    if eye_height is not None:
-        eye_height = check_float(eye_height, "eye_height", min=0.0, min_exclusive=True)
+    videos, known_distance, eye_height = _check_video_args(
+        videos, out_dir, sync, intrinsics, known_distance, eye_height, progress
+    )
     _silence_glog()
     timings: dict[str, float] = {}
     warns: list[str] = []
@@ -1621,6 +1670,9 @@ class PoseErrors:
     centre: FloatArray
     rotation: FloatArray
     scale: float
+
+    def __post_init__(self) -> None:
+        readonly_fields(self)
 
     def to_dict(self) -> dict[str, Any]:
         return {

@@ -40,7 +40,7 @@ import numpy as np
 import numpy.typing as npt
 from scipy import signal  # type: ignore[import-untyped]
 
-from socialcam._validate import FloatArray, check_float, readonly
+from socialcam._validate import FloatArray, as_float_array, check_float, check_int, readonly
 from socialcam.video import Video, open_video
 
 F32 = npt.NDArray[np.float32]
@@ -117,7 +117,8 @@ class _Track:
 def onset_envelope(x: npt.ArrayLike, rate: int) -> FloatArray:
     """Gain-invariant onset strength of ``x`` (mono samples at ``rate`` Hz): standardised
     positive log-energy flux, one value every 2.5 ms (value ``i`` at ``i · 2.5 ms``)."""
-    a = np.asarray(x, dtype=np.float64)
+    a = as_float_array(x, "x", (None,))
+    rate = check_int(rate, "rate", min=1)
     hop = max(1, round(HOP_S * rate))
     win = max(hop, round(WIN_S * rate))
     n = (len(a) - win) // hop + 1

@@ -6,7 +6,6 @@ from dataclasses import dataclass
 
 import numpy as np
 import numpy.typing as npt
-from scipy.spatial.transform import Rotation  # type: ignore[import-untyped]
 
 from socialcam._validate import FloatArray, as_float_array, check_float, check_int, check_seed
 from socialcam.camera import Cameras
@@ -74,6 +73,9 @@ def fixation_segment(
         raise ValueError("target: the eye passes through the target")
     u = to_target / np.linalg.norm(to_target, axis=1, keepdims=True)
     w = primary_from_true(u, h, rng) if h > 0 else u
+    # scipy is imported here, not at the top: `import socialcam` stays light.
+    from scipy.spatial.transform import Rotation  # type: ignore[import-untyped]
+
     R = np.empty((n, 3, 3))
     C = np.empty((n, 3))
     for i in range(n):

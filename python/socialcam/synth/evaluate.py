@@ -383,7 +383,7 @@ def face_joint_attention(
         for p in members_ok:
             if since[k, p] >= settle and codes[k, p] <= HEAD:
                 groups.setdefault(int(codes[k, p]), []).append(int(p))
-        charges = find_charges(rays, seed, bounds=bounds, **charge_options) if rays else []
+        charges = find_charges(rays, seed=seed, bounds=bounds, **charge_options) if rays else []
         for code, mem in groups.items():
             if len(mem) < 2:
                 continue

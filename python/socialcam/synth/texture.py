@@ -1,6 +1,7 @@
 """Rich, non-repetitive surface textures for the rendered test bed.
 
-Repetitive texture gives structure from motion wrong poses that look right (STACK.md), so
+Repetitive texture gives structure from motion wrong poses that look right (a repetitive
+texture gave "12/12 registered" at a low reprojection error with wrong poses), so
 every surface gets its own texture, seeded, with detail at every scale:
 
 - a "dead leaves" image — overlapping disks, ellipses, rectangles and polygons whose sizes

@@ -83,7 +83,7 @@ pub struct ArticulatedOptions {
     /// frames, shrinking an over-estimated length as well as enlarging a short one. The
     /// thesis only enlarges (Sec 4.4.1, the default); fitting assumes that the bone passes
     /// at least once near perpendicular to the viewing ray, and makes the reconstruction
-    /// robust to over-estimated lengths and root error (see the report of issue 4).
+    /// robust to over-estimated lengths and root error.
     pub fit_radius: bool,
     pub method: ArticulatedMethod,
     /// Robust method: the shrunk BQP sphere has the radius of this quantile (in `[0, 1]`)
