@@ -22,9 +22,13 @@ chosen on those three sets (all seen before). Fresh (session 6, held out until t
 was fixed): CMU 131_01 frames 750–993 (to a stop), 131_02 frames 200–499 (starting to
 walk), every offset, and 85_02 frames 300–779 (offsets 300, 390, 480, 570, 660).
 Unseen (session 7, measured once at the end): CMU 131_01 frames 0–149 and 131_02 frames
-0–199 (standing, then the first steps). "robust" also refines the selected start again
-with the DCT basis grown to the motion (refine_k_max, size by BIC); "robust-k8" is session
-6's method (refine_k_max=0).
+0–199 (standing, then the first steps). "robust-k8" is session 6's method
+(refine_k_max=0; --full); "robust-s7" session 7's, which also refines the selected start
+again with the DCT basis grown to the motion (refine_k_max, size by BIC); "robust" (session
+8) also gets the pixels of the joint's own children (with their given lengths, × 1.05
+under Fig 4.3(c)) and rejects starts that leave a child's ray out of its reach
+(child_slack). Unseen8 (session 8, measured once at the end): every clip sampled at 40 Hz
+from frames 10 and 100 (cuts no part used).
 Run: python benches/articulated_accuracy.py [--quick | --full] [--parts dev,fresh,...]
 """
 
@@ -107,6 +111,23 @@ def smooth_offset(F: int, magnitude: float, rng: np.random.Generator) -> np.ndar
     return off * magnitude / np.linalg.norm(off, axis=1).mean()
 
 
+def observed(
+    w: Window, j: int, noise: float, missing: float, seed: int
+) -> tuple[np.ndarray, np.random.Generator]:
+    """Joint ``j``'s pixels with noise and missing frames, and the generator that drew them
+    (``run`` goes on with it), so a child seen as evidence has the pixels of its own
+    reconstruction."""
+    rng = np.random.default_rng(seed * 1000 + 17 * j)
+    x = w.px[:, j] + rng.normal(0, noise, (w.P.shape[0], 2))
+    x[rng.random(w.P.shape[0]) < missing] = np.nan
+    return x, rng
+
+
+def bone(w: Window, j: int, p: int) -> float:
+    """Mean length of the bone from ``p`` to ``j`` over the window, metres."""
+    return float(np.linalg.norm(w.P[:, j] - w.P[:, p], axis=1).mean())
+
+
 def run(
     w: Window,
     j: int,
@@ -120,14 +141,17 @@ def run(
     seed=0,
     world=False,
 ) -> float:
-    rng = np.random.default_rng(seed * 1000 + 17 * j)
     F = w.P.shape[0]
-    r = float(np.linalg.norm(w.P[:, j] - w.P[:, p], axis=1).mean())
-    x = w.px[:, j] + rng.normal(0, noise, (F, 2))
-    x[rng.random(F) < missing] = np.nan
+    r = bone(w, j, p)
+    x, rng = observed(w, j, noise, missing, seed)
     parent = w.P[:, p] + smooth_offset(F, root * r, rng)
     kw = METHOD_OPTIONS[method]
-    out = sc.reconstruct_articulated(x, w.cams, parent, r * scale, k=K_DCT, **kw)
+    children = [
+        (observed(w, c, noise, missing, seed)[0], bone(w, c, j) * scale)
+        for c, pc in w.pairs
+        if pc == j and method not in WITHOUT_CHILDREN
+    ]
+    out = sc.reconstruct_articulated(x, w.cams, parent, r * scale, k=K_DCT, children=children, **kw)
     den = w.P[:, j] if world else w.P[:, j] - w.P[:, p]
     return float(np.linalg.norm(out.points - w.P[:, j]) / np.linalg.norm(den))
 
@@ -142,10 +166,16 @@ METHOD_OPTIONS: dict[str, dict] = {
     },
     "robust-smooth": {"method": "robust", "motion_weight": 0.0, "refine_k_max": 0},
     "robust-k8": {"method": "robust", "refine_k_max": 0},
+    "robust-s7": {"method": "robust"},
     "robust": {"method": "robust"},
 }
-FULL_ONLY = ("robust-mincost", "robust-smooth")
-PARTS = ("dev", "held-out", "new", "fresh", "unseen")
+# Methods given the joint's pixels only; the others also get its children's pixels.
+WITHOUT_CHILDREN = ("thesis", "robust-mincost", "robust-smooth", "robust-k8", "robust-s7")
+FULL_ONLY = ("robust-mincost", "robust-smooth", "robust-k8")
+PARTS = ("dev", "held-out", "new", "fresh", "unseen", "unseen8")
+# Session 8's never-seen cuts: every clip sampled at 40 Hz (every third frame) from
+# frames 10 and 100, 60 frames each (the other parts sample every second frame).
+UNSEEN8_STEP, UNSEEN8_OFFSETS = 3, (10, 100)
 FRESH_C3D_OFFSETS = (300, 390, 480, 570, 660)
 
 
@@ -194,6 +224,12 @@ def main() -> None:
             wins.append((part, window(name, P, pairs, 2, off)))
     P85, pairs85 = clips["85_02"]
     wins += [("fresh", window("85_02", P85, pairs85, 2, off)) for off in FRESH_C3D_OFFSETS]
+    wins += [
+        ("unseen8", window(name, P, pairs, UNSEEN8_STEP, off))
+        for name, (P, pairs) in clips.items()
+        for off in UNSEEN8_OFFSETS
+        if P[off::UNSEEN8_STEP].shape[0] >= 60
+    ]
     wins = [(part, w) for part, w in wins if part in parts]
     good = [(part, w, j, p) for part, w in wins for j, p in w.pairs if w.eta[j] > 1.25]
     for part in parts:

@@ -187,7 +187,7 @@ BASE: dict[str, tuple[list[Any], dict[str, Any]]] = {
     "gaze_angle_to_charges": ([POS, MAG, KAPPA, FRAME, QPTS, V_EYE[:2], 0.3], {}),
     "solve_bqp": ([Q, np.ones(3), Opts(BQP_OPTS)], {}),
     "reconstruct_articulated": (
-        [K, R, C, PIX_CHILD, PARENT, TIMES, 0.4, Opts(ART_OPTS)],
+        [K, R, C, PIX_CHILD, PARENT, TIMES, 0.4, Opts(ART_OPTS), [(PIX_CHILD, 0.3)]],
         {},
     ),
     "reconstruct_skeleton": (

@@ -235,9 +235,11 @@ def reconstruct_articulated(
     times: _F64,
     length: float,
     options: Any,
+    children: list[tuple[_F64, float]] = ...,
 ) -> dict[str, Any]:
     """One articulated trajectory from ``x (F,2)`` (NaN = missing) and ``parent (F,3)``;
-    ``options`` is an ``ArticulatedOptions`` (its fields are read). A dict with ``X (F,3)``,
+    ``options`` is an ``ArticulatedOptions`` (its fields are read); ``children``: the
+    joint's children as ``(x_c (F,2), bone length)``. A dict with ``X (F,3)``,
     ``radius``, ``bqp_radius``, ``coeffs_theta``/``coeffs_phi (K,)``, ``bqp_size``,
     ``bqp_objective``, ``bqp_gap``, ``bqp_nodes``, ``bqp_optimal``, ``n_observed``,
     ``reprojection_rms``, ``lm_iterations``, ``converged``."""

@@ -302,6 +302,13 @@ class ArticulatedOptions:
         size with the lowest Bayesian information criterion on the reprojection error is
         kept (sizes above half the observed frames are not tried). ``≤ k`` keeps ``k``
         (session 6's method). The result's coefficients have the kept size.
+    child_slack : robust method, when the joint's children are given (``children`` of
+        :func:`reconstruct_articulated`; :func:`reconstruct_skeleton` always gives them):
+        each child must lie on its own viewing ray within ``(1 + child_slack)`` times its
+        bone length of the joint; ≥ 0. A start whose joint lies farther from a child's ray
+        pays the child's reprojection error of that frame (the excess distance in pixels at
+        the joint's depth, squared) in the selection score. On the impostor side of its ray
+        the joint is often out of its children's reach, which its own pixels cannot show.
     max_iter : Levenberg–Marquardt iterations of the refinement (≥ 1).
     time_limit : seconds per binary program (the best incumbent is used after it), or
         ``None``.
@@ -320,6 +327,7 @@ class ArticulatedOptions:
     smooth_weight: float = 1.0
     motion_weight: float = 2.0
     refine_k_max: int = 16
+    child_slack: float = 0.1
     max_iter: int = 100
     time_limit: float | None = None
     node_limit: int | None = DEFAULT_NODE_LIMIT
@@ -337,6 +345,7 @@ class ArticulatedOptions:
         check_float(self.smooth_weight, "smooth_weight", min=0.0, max=1e6)
         check_float(self.motion_weight, "motion_weight", min=0.0, max=1e6)
         check_int(self.refine_k_max, "refine_k_max", min=0, max=10_000)
+        check_float(self.child_slack, "child_slack", min=0.0, max=1e6)
         check_int(self.max_iter, "max_iter", min=1, max=100_000)
         if self.time_limit is not None:
             check_float(self.time_limit, "time_limit", min=0.0, max=1e9)
@@ -365,6 +374,7 @@ def reconstruct_articulated(
     parent: npt.ArrayLike,
     length: float,
     *,
+    children: Sequence[tuple[npt.ArrayLike, float]] | None = None,
     options: ArticulatedOptions | None = None,
     **overrides: Any,
 ) -> ArticulatedTrajectory:
@@ -378,6 +388,10 @@ def reconstruct_articulated(
     parent : (F, 3) parent positions, metres, every frame.
     length : bone length in metres (> 0); see :class:`ArticulatedOptions` for how it is
         enlarged (thesis) or refined (robust method).
+    children : the joint's own children, if observed: ``(x_c (F, 2) pixels, NaN rows
+        missing; bone length from this joint in metres)`` each. The robust method rejects
+        starts that leave a child's ray out of its reach (``child_slack``); the thesis
+        method ignores them.
     options : :class:`ArticulatedOptions`; ``overrides`` replace some of its fields
         (e.g. ``k=10, method="thesis"``).
 
@@ -393,8 +407,18 @@ def reconstruct_articulated(
     x_ = as_float_array(x, "x", (f, 2), allow_nan=True)
     p_ = as_float_array(parent, "parent", (f, 3))
     length_ = check_float(length, "length", min=0.0, min_exclusive=True)
+    kids = []
+    for c, (xc, lc) in enumerate(children or ()):
+        kids.append(
+            (
+                as_float_array(xc, f"children[{c}] pixels", (f, 2), allow_nan=True),
+                check_float(lc, f"children[{c}] length", min=0.0, min_exclusive=True),
+            )
+        )
     t = _times(cameras)
-    d = _core.reconstruct_articulated(cameras.K, cameras.R, cameras.C, x_, p_, t, length_, opts)
+    d = _core.reconstruct_articulated(
+        cameras.K, cameras.R, cameras.C, x_, p_, t, length_, opts, kids
+    )
     return _traj(d, t)
 
 

@@ -198,6 +198,8 @@ struct PyArticulatedOptions {
     #[pyo3(attribute)]
     refine_k_max: usize,
     #[pyo3(attribute)]
+    child_slack: f64,
+    #[pyo3(attribute)]
     max_iter: usize,
     #[pyo3(attribute)]
     time_limit: Option<f64>,
@@ -228,6 +230,7 @@ fn art_options(o: &PyArticulatedOptions) -> PyResult<ArticulatedOptions> {
         smooth_weight: o.smooth_weight,
         motion_weight: o.motion_weight,
         refine_k_max: o.refine_k_max,
+        child_slack: o.child_slack,
         lm: socialcore::geometry::LmOptions {
             max_iterations: o.max_iter,
             ..defaults.lm
@@ -271,7 +274,7 @@ fn result_dict<'py>(
 
 /// One articulated trajectory (Eq 4.5–4.12); returns a dict (see `_core.pyi`).
 #[pyfunction]
-#[pyo3(signature = (k_mat, r_mat, c_mat, x, parent, times, length, options))]
+#[pyo3(signature = (k_mat, r_mat, c_mat, x, parent, times, length, options, children=Vec::new()))]
 #[allow(clippy::too_many_arguments)]
 fn reconstruct_articulated<'py>(
     py: Python<'py>,
@@ -283,6 +286,7 @@ fn reconstruct_articulated<'py>(
     times: PyReadonlyArray1<'py, f64>,
     length: f64,
     options: Bound<'py, PyAny>,
+    children: Vec<(PyReadonlyArray2<'py, f64>, f64)>,
 ) -> PyResult<Bound<'py, pyo3::types::PyDict>> {
     let options: PyArticulatedOptions = crate::convert::options(&options, "ArticulatedOptions")?;
     let cams = cameras(&k_mat, &r_mat, &c_mat)?;
@@ -291,8 +295,18 @@ fn reconstruct_articulated<'py>(
     let par = points(&parent, "parent", f)?;
     let t = times_of(&times, f)?;
     let opts = art_options(&options)?;
+    let kids = children
+        .iter()
+        .map(|(xc, length)| {
+            Ok(art::ChildObservations {
+                pixels: pixels_2d(xc, f)
+                    .map_err(|e| PyValueError::new_err(format!("children: {e}")))?,
+                length: *length,
+            })
+        })
+        .collect::<PyResult<Vec<_>>>()?;
     let r = detach(py, || {
-        art::reconstruct_articulated(&cams, &px, &par, &t, length, &opts)
+        art::reconstruct_articulated_with(&cams, &px, &par, &t, length, &kids, &opts)
     })?;
     result_dict(py, r)
 }

@@ -66,6 +66,11 @@ pub const MOTION_WEIGHT: f64 = 2.0;
 /// equally smooth: keeps the logarithm finite for trajectories inside the basis.
 pub const ROUGHNESS_FLOOR: f64 = 1e-6;
 
+/// Default of [`ArticulatedOptions::child_slack`]: a child may lie up to 10 % farther from
+/// the joint than its given bone length (the tolerance of the joint's own length,
+/// [`ArticulatedOptions::length_tol`]).
+pub const CHILD_SLACK: f64 = 0.1;
+
 /// Default of [`ArticulatedOptions::refine_k_max`]: twice the default `k`.
 pub const REFINE_K_MAX: usize = 16;
 
@@ -119,6 +124,14 @@ pub struct ArticulatedOptions {
     /// observations) is kept. Sizes above half the observed frames are not tried;
     /// `refine_k_max ≤ k` keeps `k` (session 6's method).
     pub refine_k_max: usize,
+    /// Robust method, with the joint's children observed ([`reconstruct_articulated_with`]):
+    /// each child must lie on its own viewing ray within `(1 + child_slack)` times its given
+    /// bone length of the joint. A start whose joint lies farther than that from a child's
+    /// ray at some frame pays the child's reprojection error of that frame (the excess
+    /// distance in pixels at the joint's depth, squared) in the selection score. The
+    /// impostor side of the joint's ray is often too far from its children's rays, which
+    /// the joint's own pixels cannot show.
+    pub child_slack: f64,
 }
 
 impl Default for ArticulatedOptions {
@@ -140,8 +153,45 @@ impl Default for ArticulatedOptions {
             smooth_weight: SMOOTH_WEIGHT,
             motion_weight: MOTION_WEIGHT,
             refine_k_max: REFINE_K_MAX,
+            child_slack: CHILD_SLACK,
         }
     }
+}
+
+/// The observations of one child of the reconstructed joint: its pixel in every frame
+/// (`None` = missing) and its given bone length (metres) from the joint.
+#[derive(Debug, Clone)]
+pub struct ChildObservations {
+    pub pixels: Vec<Option<Vector2<f64>>>,
+    pub length: f64,
+}
+
+/// Squared pixel distance by which the children's rays miss their reach from the joint
+/// trajectory `points`: at each frame where child `c` is observed, the distance of the
+/// joint from the child's ray beyond `(1 + slack) · length_c`, times the focal length over
+/// the joint's depth. Zero when every child can lie on its ray within reach.
+fn children_miss(
+    cameras: &[Camera],
+    children: &[ChildObservations],
+    points: &[Vector3<f64>],
+    slack: f64,
+) -> f64 {
+    let mut total = 0.0;
+    for child in children {
+        let reach = child.length * (1.0 + slack);
+        for (i, u) in child.pixels.iter().enumerate() {
+            let (Some(u), Some(x)) = (u, points.get(i)) else {
+                continue;
+            };
+            let cam = &cameras[i];
+            let excess = line_point_distance(&cam.c, &cam.ray_direction(u), x) - reach;
+            let depth = (cam.r * (x - cam.c)).z;
+            if excess > 0.0 && depth > 0.0 {
+                total += (excess * cam.k[(0, 0)] / depth).powi(2);
+            }
+        }
+    }
+    total
 }
 
 /// One reconstructed articulated trajectory.
@@ -598,6 +648,9 @@ pub(crate) struct StartEvidence {
     pub roughness: f64,
     /// Angular variance of the refined unit directions over every frame, `Σ ‖u_t − ū‖²`.
     pub motion: f64,
+    /// Squared pixel distance by which the children's rays miss their reach from the
+    /// refined joint ([`children_miss`]; 0 without children).
+    pub children: f64,
 }
 
 /// Weights of the selection score: `(smooth_weight, motion_weight)`.
@@ -612,19 +665,22 @@ pub(crate) type SelectionWeights = (f64, f64);
 /// a χ² with `2 n_obs − 2k − 1` degrees of freedom (the noise variance estimated from the
 /// lowest cost), plus `smooth · log₁₀` of its roughness plus `motion · log₁₀` of its
 /// angular variance: a tenfold smoother start may fit the pixels worse by `smooth`
-/// standard deviations, a tenfold stiller one by `motion`. `None` (or zero weights) keeps
-/// the lowest cost.
+/// standard deviations, a tenfold stiller one by `motion`. The cost includes the children's
+/// misses (their pixels are part of the data). `None` (or zero weights) keeps the lowest
+/// cost.
 pub(crate) fn select_start(
     starts: &[StartEvidence],
     n_obs: usize,
     k: usize,
     weights: Option<SelectionWeights>,
 ) -> Option<usize> {
-    let lowest = (0..starts.len()).min_by(|&a, &b| starts[a].cost.total_cmp(&starts[b].cost))?;
+    let total = |e: &StartEvidence| e.cost + e.children;
+    let lowest =
+        (0..starts.len()).min_by(|&a, &b| total(&starts[a]).total_cmp(&total(&starts[b])))?;
     let Some((smooth, motion)) = weights.filter(|&(s, m)| s > 0.0 || m > 0.0) else {
         return Some(lowest);
     };
-    let cmin = starts[lowest].cost;
+    let cmin = total(&starts[lowest]);
     let dof = (2 * n_obs).saturating_sub(2 * k + 1).max(1) as f64;
     let sd = ((2.0 * dof).sqrt() * cmin / dof).max(f64::MIN_POSITIVE);
     let log = |v: f64, w: f64| -> f64 {
@@ -635,7 +691,7 @@ pub(crate) fn select_start(
         }
     };
     let score = |e: &StartEvidence| -> f64 {
-        let s = (e.cost - cmin) / sd + log(e.roughness, smooth) + log(e.motion, motion);
+        let s = (total(e) - cmin) / sd + log(e.roughness, smooth) + log(e.motion, motion);
         if e.roughness.is_nan() || e.motion.is_nan() || s.is_nan() {
             f64::INFINITY
         } else {
@@ -655,7 +711,54 @@ pub fn reconstruct_articulated(
     length: f64,
     opts: &ArticulatedOptions,
 ) -> Result<ArticulatedResult> {
+    reconstruct_articulated_with(cameras, pixels, parent, times, length, &[], opts)
+}
+
+/// [`reconstruct_articulated`] with the joint's own children observed: the robust method
+/// weighs each start by whether the children can lie on their rays within reach of it
+/// ([`ArticulatedOptions::child_slack`]); the thesis method ignores them.
+pub fn reconstruct_articulated_with(
+    cameras: &[Camera],
+    pixels: &[Option<Vector2<f64>>],
+    parent: &[Vector3<f64>],
+    times: &[f64],
+    length: f64,
+    children: &[ChildObservations],
+    opts: &ArticulatedOptions,
+) -> Result<ArticulatedResult> {
     validate_common(cameras, pixels, parent, times, length)?;
+    for (c, child) in children.iter().enumerate() {
+        if child.pixels.len() != cameras.len() {
+            return Err(Error::invalid(
+                "children",
+                format!(
+                    "child {c}: need one pixel entry per camera frame ({}), got {}",
+                    cameras.len(),
+                    child.pixels.len()
+                ),
+            ));
+        }
+        if !(child.length.is_finite() && child.length > 0.0) {
+            return Err(Error::invalid(
+                "children",
+                format!(
+                    "child {c}: length must be positive and finite, got {}",
+                    child.length
+                ),
+            ));
+        }
+        if child
+            .pixels
+            .iter()
+            .flatten()
+            .any(|u| !u.iter().all(|v| v.is_finite()))
+        {
+            return Err(Error::invalid(
+                "children",
+                format!("child {c}: a pixel must be finite or the whole row NaN"),
+            ));
+        }
+    }
     if opts.k == 0 {
         return Err(Error::invalid("k", "must be at least 1"));
     }
@@ -674,6 +777,7 @@ pub fn reconstruct_articulated(
     for (name, w) in [
         ("smooth_weight", opts.smooth_weight),
         ("motion_weight", opts.motion_weight),
+        ("child_slack", opts.child_slack),
     ] {
         if !(w.is_finite() && w >= 0.0) {
             return Err(Error::invalid(
@@ -771,9 +875,10 @@ pub fn reconstruct_articulated(
             frame: *frame,
             prior,
         };
+        let points: Vec<Vector3<f64>> = (0..f).map(|i| fit.point(i, at, ap, *r)).collect();
         let dirs: Vec<Vector3<f64>> = (0..f)
             .map(|i| {
-                let d = fit.point(i, at, ap, *r) - parent[i];
+                let d = points[i] - parent[i];
                 d / d.norm().max(f64::MIN_POSITIVE)
             })
             .collect();
@@ -788,10 +893,16 @@ pub fn reconstruct_articulated(
                 f64::INFINITY
             }
         };
+        let children = if robust {
+            children_miss(cameras, children, &points, opts.child_slack)
+        } else {
+            0.0
+        };
         StartEvidence {
             cost: *cost,
             roughness: finite(rough),
             motion: finite(motion),
+            children: finite(children),
         }
     };
     for radius in radii {
@@ -1256,12 +1367,26 @@ pub fn reconstruct_skeleton(
             .clone()
             .ok_or_else(|| Error::invalid("parents", "parent not reconstructed"))?;
         let px: Vec<Option<Vector2<f64>>> = pixels.iter().map(|row| row[j]).collect();
-        let res =
-            reconstruct_articulated(cameras, &px, &parent, times, skeleton.lengths()[j], opts)
-                .map_err(|e| match e {
-                    Error::Degenerate(m) => Error::Degenerate(format!("joint {j}: {m}")),
-                    other => other,
-                })?;
+        let kids: Vec<ChildObservations> = (0..nj)
+            .filter(|&c| skeleton.parents()[c] == Some(j))
+            .map(|c| ChildObservations {
+                pixels: pixels.iter().map(|row| row[c]).collect(),
+                length: skeleton.lengths()[c],
+            })
+            .collect();
+        let res = reconstruct_articulated_with(
+            cameras,
+            &px,
+            &parent,
+            times,
+            skeleton.lengths()[j],
+            &kids,
+            opts,
+        )
+        .map_err(|e| match e {
+            Error::Degenerate(m) => Error::Degenerate(format!("joint {j}: {m}")),
+            other => other,
+        })?;
         traj[j] = Some(res.points.clone());
         results[j] = Some(res);
     }

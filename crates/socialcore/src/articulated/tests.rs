@@ -345,6 +345,7 @@ fn start_selection_trades_cost_against_smoothness() {
                 cost,
                 roughness,
                 motion: 1.0,
+                children: 0.0,
             })
             .collect();
         for motion in [0.0, 2.0] {
@@ -362,6 +363,7 @@ fn start_selection_prefers_the_stiller_of_equal_starts() {
         cost,
         roughness,
         motion,
+        children: 0.0,
     };
     let w = Some((SMOOTH_WEIGHT, MOTION_WEIGHT));
     let base = ev(83.0, 1e-3, 4.0);
@@ -423,4 +425,52 @@ fn final_refinement_grows_the_basis_to_the_motion() {
         assert!(grown.reprojection_rms < 0.5, "{msg}");
         assert!(eg < 0.1 && ef > 0.25 && eg < ef / 3.0, "{msg}");
     }
+}
+
+#[test]
+fn children_out_of_reach_outweigh_a_better_fit() {
+    // A joint 2 m in front of a camera (f = 1000 px); its child's ray passes 0.35 m from it
+    // for a 0.3 m bone: beyond the 10 % slack (0.33 m) by 0.02 m = 10 px at that depth.
+    let cam = Camera::new(
+        Matrix3::new(1000.0, 0.0, 0.0, 0.0, 1000.0, 0.0, 0.0, 0.0, 1.0),
+        Matrix3::identity(),
+        Vector3::zeros(),
+        0,
+    )
+    .unwrap();
+    let joint = Vector3::new(0.0, 0.0, 2.0);
+    // The pixel whose ray passes 0.35 m from the joint: tan = 0.35 / √(2² − 0.35²).
+    let child_px = Some(Vector2::new(
+        1000.0 * 0.35 / (4.0f64 - 0.35 * 0.35).sqrt(),
+        0.0,
+    ));
+    let kids = [ChildObservations {
+        pixels: vec![child_px, None],
+        length: 0.3,
+    }];
+    let miss = children_miss(&[cam, cam], &kids, &[joint, joint], 0.1);
+    assert!((miss - 100.0).abs() < 1e-6, "{miss}");
+    // Within reach: no cost.
+    let near = [ChildObservations {
+        pixels: vec![child_px, None],
+        length: 0.33,
+    }];
+    assert_eq!(children_miss(&[cam, cam], &near, &[joint, joint], 0.1), 0.0);
+    // Two starts alike but for 1 px² of fit: the one whose children are out of reach by
+    // 100 px² loses; without children the better fit wins.
+    let ev = |cost: f64, children: f64| StartEvidence {
+        cost,
+        roughness: 1e-3,
+        motion: 1.0,
+        children,
+    };
+    let w = Some((SMOOTH_WEIGHT, MOTION_WEIGHT));
+    assert_eq!(
+        select_start(&[ev(100.0, 100.0), ev(101.0, 0.0)], 50, 8, w),
+        Some(1)
+    );
+    assert_eq!(
+        select_start(&[ev(100.0, 0.0), ev(101.0, 0.0)], 50, 8, w),
+        Some(0)
+    );
 }
