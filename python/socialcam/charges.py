@@ -330,7 +330,9 @@ class ChargeOptions:
         frames, a target that turns or bounces within the window like the party's
         table-tennis ball, takes in each frame the widest fit that no narrower one
         rejects); every person's attention is decoded over the whole sequence (Viterbi),
-        and sources are dropped while the likelihood grows. A frame's charges are the
+        then every pair of people jointly given the others (two people who must change
+        target together, each of whom alone would make no charge), and sources are
+        dropped while the likelihood grows. A frame's charges are the
         sources with ``min_members`` rays attending. People are followed by their
         ``ids``. The window resolves frames that the frame alone cannot (two close
         targets seen from far, pairs of near-parallel rays); it cannot split a target

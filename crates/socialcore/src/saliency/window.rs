@@ -33,7 +33,9 @@
 //! sources and `K_t`; `K_t` and the rule that a charge has `min_members` rays are
 //! iterated: in each frame the weakest source with too few rays is closed to the people
 //! present, one per round, so that rays split over two copies of one target meet at the
-//! other), and sources are dropped one at a time while the objective grows. The
+//! other), then every pair of people is decoded jointly given the others (pair moves: a
+//! new pair whose members each alone would make no charge changes target together), and
+//! sources are dropped one at a time while the objective grows. The
 //! objective is that of the assignment returned, every term from it: a ray of a source
 //! with fewer than `min_members` rays attends none (gains nothing), and a source that keeps
 //! no ray pays no Occam cost and carries no one. Refitting the positions may lower it, so
@@ -51,6 +53,11 @@ use rayon::prelude::*;
 const ROUNDS: usize = 4;
 /// Most rounds of decoding while `K_t` and the `min_members` rule settle.
 const DECODE_ROUNDS: usize = 8;
+/// A pair move considers, per person and frame, the sources whose gain is within this
+/// many switch costs of the person's best (besides none and its current state).
+const PAIR_PRUNE: f64 = 3.0;
+/// Most sweeps of pair moves over all pairs of people.
+const PAIR_SWEEPS: usize = 3;
 /// Linking gate: squared Mahalanobis distance between a charge and a source's last one.
 const LINK_GATE: f64 = 16.0;
 /// Charges within this many metres (plus the drift) may be linked without sharing members.
@@ -347,6 +354,15 @@ impl Model<'_> {
         })
     }
 
+    /// Whether states `a` and `b` (sources `a − 1`, `b − 1`) are within `merge_radius` of
+    /// each other in frame `t` (copies of one target).
+    fn near(&self, pos: &Positions, t: usize, a: usize, b: usize) -> bool {
+        match (pos[a - 1][t], pos[b - 1][t]) {
+            (Some((xa, _)), Some((xb, _))) => (xa - xb).norm() <= self.opts.merge_radius,
+            _ => false,
+        }
+    }
+
     /// Cost of person's change from state `a` to `b` (0 = none, `k + 1` = source `k`) into
     /// frame `t`.
     fn transition(&self, pos: &Positions, t: usize, a: usize, b: usize) -> f64 {
@@ -377,14 +393,274 @@ impl Model<'_> {
         pos: &Positions,
         k_t: &[usize],
     ) -> Option<f64> {
+        let e = self.gain(p, t, k, pos)?;
+        Some(match self.row[t][p] {
+            Some(_) => e - (k_t[t].max(1) as f64).ln(),
+            None => e,
+        })
+    }
+
+    /// [`Model::emission`] without the `− ln K_t` term (0 for an absent person).
+    fn gain(&self, p: usize, t: usize, k: usize, pos: &Positions) -> Option<f64> {
         let (x, _) = pos[k][t]?;
         let Some(i) = self.row[t][p] else {
             return Some(0.0);
         };
         let rays = &self.frames[t];
-        let gain = (2.0 * rays.inv_h2[i]).ln() + self.prior - (k_t[t].max(1) as f64).ln();
-        let e = gain - 0.5 * q_of(rays, i, &x);
+        let e = (2.0 * rays.inv_h2[i]).ln() + self.prior - 0.5 * q_of(rays, i, &x);
         (e.is_finite() && self.inside(&x)).then_some(e)
+    }
+
+    /// The states' per-frame counts of present people (index `k` for source `k`).
+    fn counts(&self, paths: &[Vec<usize>], t: usize, n_sources: usize) -> Vec<usize> {
+        let mut c = vec![0; n_sources];
+        for (p, path) in paths.iter().enumerate() {
+            if self.row[t][p].is_some() && path[t] > 0 {
+                c[path[t] - 1] += 1;
+            }
+        }
+        c
+    }
+
+    /// A source with fewer than `min_members` present people in a frame is no charge
+    /// there: its people attend none.
+    fn clean(&self, paths: &mut [Vec<usize>], n_sources: usize) {
+        for t in 0..self.frames.len() {
+            let c = self.counts(paths, t, n_sources);
+            for (p, path) in paths.iter_mut().enumerate() {
+                if self.row[t][p].is_some() && path[t] > 0 && c[path[t] - 1] < self.opts.min_members
+                {
+                    path[t] = 0;
+                }
+            }
+        }
+    }
+
+    /// The log likelihood of clean `paths` (see [`Model::clean`]): emissions with `K_t`
+    /// the charges of each frame, minus the switch costs.
+    fn likelihood(&self, paths: &[Vec<usize>], pos: &Positions) -> f64 {
+        let k_t: Vec<usize> = (0..self.frames.len())
+            .map(|t| {
+                self.counts(paths, t, pos.len())
+                    .iter()
+                    .filter(|&&n| n >= self.opts.min_members)
+                    .count()
+            })
+            .collect();
+        (0..self.n_people)
+            .map(|p| self.path_score(p, &paths[p], pos, &k_t))
+            .sum()
+    }
+
+    /// Pair moves: two people who must change target together (a new pair, each of whom
+    /// alone would make no charge, so neither moves when decoded alone). For every pair
+    /// of people, their two paths are decoded jointly given everyone else's (Viterbi over
+    /// the pairs of their states: each person's current state, none, and the sources
+    /// within [`PAIR_PRUNE`] switch costs of its best gain in the frame), each frame
+    /// scored by the whole frame's likelihood — the `min_members` rule and `K_t` with
+    /// the pair's states, so a source the two make a charge together gains both rays.
+    /// A move opens charges or keeps them, it closes none unless the pair goes to a copy
+    /// of the closed source (within `merge_radius`): closing a target is the drops' work,
+    /// which weigh its Occam cost and refit the positions (with the positions held, the
+    /// `ln K_t` that every ray saves pulls pairs into neighbouring groups). A move is kept
+    /// when the likelihood of the cleaned paths grows.
+    fn pair_moves(&self, paths: &mut [Vec<usize>], pos: &Positions, live: &[bool]) -> Result<()> {
+        let (f, n, ns) = (self.frames.len(), self.n_people, live.len() + 1);
+        let min = self.opts.min_members;
+        if n < 2 || f == 0 {
+            return Ok(());
+        }
+        // gains[t][p][s]: state s's gain without `− ln K_t` (state 0: none, 0).
+        let gains: Vec<Vec<Vec<Option<f64>>>> = (0..f)
+            .map(|t| {
+                (0..n)
+                    .map(|p| {
+                        (0..ns)
+                            .map(|s| match s {
+                                0 => Some(0.0),
+                                _ if !live[s - 1] => None,
+                                _ => self.gain(p, t, s - 1, pos),
+                            })
+                            .collect()
+                    })
+                    .collect()
+            })
+            .collect();
+        let trans: Vec<Vec<f64>> = (0..f)
+            .map(|t| {
+                (0..ns * ns)
+                    .map(|ab| match t {
+                        0 => 0.0,
+                        _ => self.transition(pos, t, ab / ns, ab % ns),
+                    })
+                    .collect()
+            })
+            .collect();
+        let prune = PAIR_PRUNE * self.opts.switch_cost.max(1.0);
+        let mut total = self.likelihood(paths, pos);
+        for _ in 0..PAIR_SWEEPS {
+            let mut moved = false;
+            for p in 0..n {
+                for q in p + 1..n {
+                    crate::interrupt::check()?;
+                    let cand = |who: usize, t: usize| -> Vec<usize> {
+                        let g = &gains[t][who];
+                        let best = g.iter().flatten().fold(f64::NEG_INFINITY, |a, &b| a.max(b));
+                        (0..ns)
+                            .filter(|&s| {
+                                s == 0
+                                    || s == paths[who][t]
+                                    || g[s].is_some_and(|e| e >= best - prune)
+                            })
+                            .collect()
+                    };
+                    let Some(new) =
+                        self.pair_decode(p, q, paths, &gains, &trans, &cand, pos, ns, min)
+                    else {
+                        continue;
+                    };
+                    if new.0 == paths[p] && new.1 == paths[q] {
+                        continue;
+                    }
+                    let old = (paths[p].clone(), paths[q].clone());
+                    paths[p] = new.0;
+                    paths[q] = new.1;
+                    let mut trial = paths.to_vec();
+                    self.clean(&mut trial, live.len());
+                    let l = self.likelihood(&trial, pos);
+                    if l > total + 1e-9 {
+                        paths.clone_from_slice(&trial);
+                        total = l;
+                        moved = true;
+                    } else {
+                        paths[p] = old.0;
+                        paths[q] = old.1;
+                    }
+                }
+            }
+            if !moved {
+                break;
+            }
+        }
+        Ok(())
+    }
+
+    /// The joint Viterbi decoding of people `p` and `q` given everyone else's `paths`
+    /// (see [`Model::pair_moves`]); `None` if no joint path is allowed.
+    #[allow(clippy::too_many_arguments)]
+    fn pair_decode(
+        &self,
+        p: usize,
+        q: usize,
+        paths: &[Vec<usize>],
+        gains: &[Vec<Vec<Option<f64>>>],
+        trans: &[Vec<f64>],
+        cand: &dyn Fn(usize, usize) -> Vec<usize>,
+        pos: &Positions,
+        ns: usize,
+        min: usize,
+    ) -> Option<(Vec<usize>, Vec<usize>)> {
+        let f = self.frames.len();
+        let mut layers: Vec<Vec<(usize, usize, f64)>> = Vec::with_capacity(f);
+        for t in 0..f {
+            // The others' counts and summed gains per source, and the frame's totals.
+            let mut n_o = vec![0usize; ns];
+            let mut a_o = vec![0.0; ns];
+            for (r, path) in paths.iter().enumerate() {
+                if r != p && r != q && self.row[t][r].is_some() && path[t] > 0 {
+                    n_o[path[t]] += 1;
+                    a_o[path[t]] += gains[t][r][path[t]].unwrap_or(0.0);
+                }
+            }
+            let (mut k0, mut n0, mut s0) = (0usize, 0usize, 0.0);
+            for s in 1..ns {
+                if n_o[s] >= min {
+                    k0 += 1;
+                    n0 += n_o[s];
+                    s0 += a_o[s];
+                }
+            }
+            let (pp, pq) = (self.row[t][p].is_some(), self.row[t][q].is_some());
+            // The frame's charges now: a pair move opens charges or keeps them, it closes
+            // none (closing a source is the drops' work, which weigh its Occam cost and
+            // refit the positions).
+            let k_now = {
+                let mut c = n_o.clone();
+                for (r, on) in [(p, pp), (q, pq)] {
+                    if on && paths[r][t] > 0 {
+                        c[paths[r][t]] += 1;
+                    }
+                }
+                c[1..].iter().filter(|&&n| n >= min).count()
+            };
+            let mut layer = Vec::new();
+            for &a in &cand(p, t) {
+                let Some(ga) = gains[t][p][a] else { continue };
+                for &b in &cand(q, t) {
+                    let Some(gb) = gains[t][q][b] else { continue };
+                    let (mut k, mut nn, mut sum, mut ok) = (k0, n0, s0, true);
+                    let touched: &[usize] = if a == b { &[a][..] } else { &[a, b][..] };
+                    for &s in touched {
+                        if s == 0 {
+                            continue;
+                        }
+                        let add_n = usize::from(a == s && pp) + usize::from(b == s && pq);
+                        if add_n == 0 {
+                            continue;
+                        }
+                        let add_g = if a == s && pp { ga } else { 0.0 }
+                            + if b == s && pq { gb } else { 0.0 };
+                        let now = n_o[s] + add_n;
+                        if now < min {
+                            ok = false;
+                            break;
+                        }
+                        if n_o[s] >= min {
+                            nn += add_n;
+                            sum += add_g;
+                        } else {
+                            k += 1;
+                            nn += now;
+                            sum += a_o[s] + add_g;
+                        }
+                    }
+                    // Closing a copy of a target (a source within `merge_radius` of
+                    // where the pair goes) is merging, not closing.
+                    let copy = |s: usize| -> bool {
+                        let after = n_o[s] + usize::from(a == s && pp) + usize::from(b == s && pq);
+                        after >= min
+                            || n_o[s]
+                                + usize::from(paths[p][t] == s && pp)
+                                + usize::from(paths[q][t] == s && pq)
+                                < min
+                            || [a, b].iter().any(|&d| d != 0 && self.near(pos, t, s, d))
+                    };
+                    let merging = [paths[p][t], paths[q][t]]
+                        .iter()
+                        .all(|&s| s == 0 || copy(s));
+                    if ok && (k >= k_now || merging) {
+                        let v = if k > 0 {
+                            sum - nn as f64 * (k as f64).ln()
+                        } else {
+                            0.0
+                        };
+                        layer.push((a, b, v));
+                    }
+                }
+            }
+            if layer.is_empty() {
+                return None;
+            }
+            layers.push(layer);
+        }
+        let layers: Vec<Vec<((usize, usize), f64)>> = layers
+            .into_iter()
+            .map(|l| l.into_iter().map(|(a, b, v)| ((a, b), v)).collect())
+            .collect();
+        let path = viterbi(&layers, |t, (a0, b0), (a, b)| {
+            trans[t][a0 * ns + a] + trans[t][b0 * ns + b]
+        });
+        Some(path.into_iter().unzip())
     }
 
     /// Viterbi decoding of person `p`'s states over the sequence, with `k_t` charges per
@@ -412,42 +688,7 @@ impl Model<'_> {
                 st
             })
             .collect();
-        let mut score: Vec<f64> = states[0].iter().map(|s| s.1).collect();
-        let mut back: Vec<Vec<usize>> = vec![Vec::new(); f];
-        for t in 1..f {
-            let mut next = Vec::with_capacity(states[t].len());
-            let mut bt = Vec::with_capacity(states[t].len());
-            for &(s, e) in &states[t] {
-                let (arg, best) = states[t - 1]
-                    .iter()
-                    .enumerate()
-                    .map(|(j, &(a, _))| (j, score[j] - self.transition(pos, t, a, s)))
-                    .fold(
-                        (0, f64::NEG_INFINITY),
-                        |acc, x| if x.1 > acc.1 { x } else { acc },
-                    );
-                next.push(best + e);
-                bt.push(arg);
-            }
-            score = next;
-            back[t] = bt;
-        }
-        let mut j = score
-            .iter()
-            .enumerate()
-            .fold(
-                (0, f64::NEG_INFINITY),
-                |acc, (j, &s)| if s > acc.1 { (j, s) } else { acc },
-            )
-            .0;
-        let mut path = vec![0; f];
-        for t in (0..f).rev() {
-            path[t] = states[t][j].0;
-            if t > 0 {
-                j = back[t][j];
-            }
-        }
-        path
+        viterbi(&states, |t, a, b| self.transition(pos, t, a, b))
     }
 
     /// The log score of person `p`'s `path` (emissions with `k_t` charges per frame, minus
@@ -540,15 +781,8 @@ impl Model<'_> {
                 }
             }
             // A source with too few rays in a frame is no charge there: its rays attend none.
-            let decoded = assign(&paths);
-            for t in 0..f {
-                let c = counts(&decoded, t);
-                for (p, path) in paths.iter_mut().enumerate() {
-                    if self.row[t][p].is_some() && path[t] > 0 && c[path[t] - 1] < min {
-                        path[t] = 0;
-                    }
-                }
-            }
+            self.clean(&mut paths, alive.len());
+            self.pair_moves(&mut paths, pos, &live)?;
             let out = assign(&paths);
             let unused: Vec<usize> = (0..alive.len())
                 .filter(|&k| live[k] && !out.iter().any(|zt| zt.contains(&Some(k))))
@@ -598,6 +832,63 @@ impl Model<'_> {
             .map(|k| self.occam(z, pos, k))
             .sum::<f64>()
     }
+}
+
+/// The best sequence of states (per frame: the states and their emissions; `cost(t, a,
+/// b)` of a change from `a` into `b` at frame `t`), the first of equals.
+fn viterbi<S: Copy>(layers: &[Vec<(S, f64)>], cost: impl Fn(usize, S, S) -> f64) -> Vec<S> {
+    let f = layers.len();
+    if f == 0 {
+        return Vec::new();
+    }
+    let mut score: Vec<f64> = layers[0].iter().map(|s| s.1).collect();
+    let mut back: Vec<Vec<usize>> = vec![Vec::new(); f];
+    for t in 1..f {
+        let mut next = Vec::with_capacity(layers[t].len());
+        let mut bt = Vec::with_capacity(layers[t].len());
+        for &(s, e) in &layers[t] {
+            let (arg, best) = layers[t - 1]
+                .iter()
+                .enumerate()
+                .map(|(j, &(a, _))| (j, score[j] - cost(t, a, s)))
+                .fold(
+                    (0, f64::NEG_INFINITY),
+                    |acc, x| if x.1 > acc.1 { x } else { acc },
+                );
+            next.push(best + e);
+            bt.push(arg);
+        }
+        score = next;
+        back[t] = bt;
+    }
+    let mut j = score
+        .iter()
+        .enumerate()
+        .fold(
+            (0, f64::NEG_INFINITY),
+            |acc, (j, &s)| if s > acc.1 { (j, s) } else { acc },
+        )
+        .0;
+    let mut path = Vec::with_capacity(f);
+    for t in (0..f).rev() {
+        path.push(layers[t][j].0);
+        if t > 0 {
+            j = back[t][j];
+        }
+    }
+    path.reverse();
+    path
+}
+
+/// One round's objective, assignment, positions and live sources.
+type Round = (f64, Assign, Positions, Vec<bool>);
+
+/// The round with the highest objective (the first of equals): refitting the positions
+/// may lower the objective from one round to the next.
+fn best_round(rounds: Vec<Round>) -> Option<Round> {
+    rounds
+        .into_iter()
+        .reduce(|kept, r| if r.0 > kept.0 { r } else { kept })
 }
 
 /// The lag bandwidths (standard deviations, frames) of the position fits, widest first:
@@ -671,7 +962,7 @@ pub(super) fn joint_window(
     };
     let mut alive = vec![true; n_sources];
     let mut pos: Positions = vec![vec![None; f]; n_sources];
-    let mut kept: Option<(f64, Assign, Positions, Vec<bool>)> = None;
+    let mut rounds: Vec<Round> = Vec::new();
     for _ in 0..ROUNDS {
         pos = (0..alive.len())
             .into_par_iter()
@@ -712,16 +1003,13 @@ pub(super) fn joint_window(
             }
         }
         let done = best_z == z;
-        if kept.as_ref().map_or(true, |k| best > k.0) {
-            kept = Some((best, best_z.clone(), pos.clone(), alive.clone()));
-        }
+        rounds.push((best, best_z.clone(), pos.clone(), alive.clone()));
         if done {
             break;
         }
         z = best_z;
     }
-    // The best round: refitting the positions may lower the objective.
-    if let Some((_, zk, pk, ak)) = kept {
+    if let Some((_, zk, pk, ak)) = best_round(rounds) {
         (z, pos, alive) = (zk, pk, ak);
     }
     Ok((0..f)
@@ -825,6 +1113,83 @@ mod tests {
         assert_eq!(out, vec![vec![Some(0), Some(0), None]]);
         let expect = likelihood(&m, &out, &pos);
         assert!((ll - expect).abs() < 1e-9, "{ll} != {expect}");
+    }
+
+    /// Frames of four people 3 m from the origin (rows = people): 0 and 1 look at the
+    /// origin, 2 and 3 at `b`; sources 0 (the origin) and 1 (`b`) in every frame.
+    fn pair_scene(b: Vector3<f64>, h: f64, n_frames: usize) -> (Vec<GazeRays>, Positions) {
+        let eyes = [
+            Vector3::new(-3.0, -0.5, 0.0),
+            Vector3::new(-3.0, 0.5, 0.0),
+            Vector3::new(3.0, -0.5, 0.0),
+            Vector3::new(3.0, 0.5, 0.0),
+        ];
+        let looks = [Vector3::zeros(), Vector3::zeros(), b, b];
+        let v = eyes
+            .iter()
+            .zip(&looks)
+            .map(|(p, x)| (x - p).normalize())
+            .collect::<Vec<_>>();
+        let rays = GazeRays::new(eyes.to_vec(), v, vec![h; 4], None).unwrap();
+        let cov = Matrix3::identity() * 0.01;
+        let pos = vec![
+            vec![Some((Vector3::zeros(), cov)); n_frames],
+            vec![Some((b, cov)); n_frames],
+        ];
+        (vec![rays; n_frames], pos)
+    }
+
+    #[test]
+    fn pair_moves_take_two_people_to_a_target_neither_takes_alone() {
+        // 2 and 3 look at a point 0.45 m from the origin, where everyone's rays are
+        // assigned. Alone, either would make no charge there (min_members = 2) and loses
+        // nothing much where it is (q ≈ 9 at the origin), so no single decoding moves it;
+        // together the two gain more than the ln 2 that the second charge costs every ray.
+        let (frames, pos) = pair_scene(Vector3::new(0.0, 0.45, 0.0), 0.05, 6);
+        let opts = ModeOptions::default();
+        let m = model(&frames, &opts);
+        let mut paths = vec![vec![1; 6]; 4];
+        let before = m.likelihood(&paths, &pos);
+        m.pair_moves(&mut paths, &pos, &[true, true]).unwrap();
+        assert_eq!(paths, vec![vec![1; 6], vec![1; 6], vec![2; 6], vec![2; 6]]);
+        assert!(m.likelihood(&paths, &pos) > before + 5.0);
+    }
+
+    #[test]
+    fn pair_moves_close_no_charge_but_merge_copies() {
+        // 2 and 3 look at a point 0.3 m from the origin (h = 0.1): with the positions held,
+        // joining 0 and 1 there raises the likelihood (every ray saves ln 2 of the mixture
+        // weight, more than the misfit), but closing a source is for the drops, which weigh
+        // its Occam cost with refitted positions. The pair stays.
+        let opts = ModeOptions::default();
+        let start = vec![vec![1; 6], vec![1; 6], vec![2; 6], vec![2; 6]];
+        let merged = vec![vec![1; 6]; 4];
+        let (frames, pos) = pair_scene(Vector3::new(0.0, 0.3, 0.0), 0.1, 6);
+        let m = model(&frames, &opts);
+        assert!(m.likelihood(&merged, &pos) > m.likelihood(&start, &pos) + 1.0);
+        let mut paths = start.clone();
+        m.pair_moves(&mut paths, &pos, &[true, true]).unwrap();
+        assert_eq!(paths, start);
+        // A source within merge_radius (0.2 m) of the other is a copy of its target: the
+        // pair merges into it.
+        let (frames, pos) = pair_scene(Vector3::new(0.0, 0.1, 0.0), 0.1, 6);
+        let m = model(&frames, &opts);
+        let mut paths = start.clone();
+        m.pair_moves(&mut paths, &pos, &[true, true]).unwrap();
+        assert!(paths == merged || paths == vec![vec![2; 6]; 4], "{paths:?}");
+    }
+
+    #[test]
+    fn the_best_round_is_returned_not_the_last() {
+        // Refitting may lower the objective from one round to the next (seed 216 without
+        // pair moves: 4308.2, 4300.8, 4311.3). The window returns the round with the
+        // highest objective, here the second of three (not the last), the first of equals.
+        let round = |j: f64, mark: usize| -> Round { (j, vec![vec![Some(mark)]], vec![], vec![]) };
+        let pick = best_round(vec![round(4308.2, 0), round(4311.3, 1), round(4300.8, 2)]);
+        assert_eq!(pick.unwrap().1, vec![vec![Some(1)]]);
+        let pick = best_round(vec![round(1.0, 0), round(1.0, 1)]);
+        assert_eq!(pick.unwrap().1, vec![vec![Some(0)]]);
+        assert!(best_round(vec![]).is_none());
     }
 
     #[test]
