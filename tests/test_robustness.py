@@ -198,30 +198,47 @@ def test_ctrl_c_stops_articulated_reconstruction():
 #: pycolmap polls for signals itself, less often than the core.
 RUN_LATENCY = 6.0
 
+_RUN_CHILD = (
+    "import signal, sys\n"
+    "signal.signal(signal.SIGINT, signal.default_int_handler)\n"
+    "import socialcam as sc\n"
+    "print('ready', flush=True)\n"
+    "sc.run(sys.argv[1:-1], sys.argv[-1], progress=False)\n"
+    "print('finished', flush=True)\n"
+)
 
-@pytest.mark.parametrize("delay", [3.0, 8.0])
-def test_ctrl_c_stops_a_pipeline_run(small_scene, tmp_path, delay):
-    """``socialcam.run`` (decoding, features, matching, mapping, gaze, charges, plots) stops
-    on Ctrl-C at any stage. In a child process, so that an import the signal lands in
-    cannot leave half-imported modules behind for the other tests."""
-    code = (
-        "import signal, sys\n"
-        "signal.signal(signal.SIGINT, signal.default_int_handler)\n"
-        "import socialcam as sc\n"
-        "print('ready', flush=True)\n"
-        "sc.run(sys.argv[1:-1], sys.argv[-1], progress=False)\n"
-        "print('finished', flush=True)\n"
-    )
-    args = [str(v) for v in small_scene.videos] + [str(tmp_path / "out")]
+
+def _run_child(videos, out):
     proc = subprocess.Popen(
-        [sys.executable, "-c", code, *args],
+        [sys.executable, "-c", _RUN_CHILD, *[str(v) for v in videos], str(out)],
         stdout=subprocess.PIPE,
         stderr=subprocess.PIPE,
         text=True,
     )
+    assert proc.stdout is not None and proc.stdout.readline().strip() == "ready"
+    return proc
+
+
+@pytest.fixture(scope="module")
+def run_duration(small_scene, tmp_path_factory):
+    """Seconds an uninterrupted ``socialcam.run`` of the small scene takes here after its
+    imports, so the interrupts below land inside it on a fast machine as on a loaded one."""
+    proc = _run_child(small_scene.videos, tmp_path_factory.mktemp("whole") / "out")
+    start = time.perf_counter()
+    out, err = proc.communicate(timeout=900)
+    assert "finished" in out, err[-2000:]
+    return time.perf_counter() - start
+
+
+@pytest.mark.parametrize("fraction", [0.25, 0.75])
+def test_ctrl_c_stops_a_pipeline_run(small_scene, run_duration, tmp_path, fraction):
+    """``socialcam.run`` (decoding, features, matching, mapping, gaze, charges, plots) stops
+    on Ctrl-C at any stage: interrupted a quarter and three quarters of the way through an
+    uninterrupted run's time. In a child process, so that an import the signal lands in
+    cannot leave half-imported modules behind for the other tests."""
+    proc = _run_child(small_scene.videos, tmp_path / "out")
     try:
-        assert proc.stdout is not None and proc.stdout.readline().strip() == "ready"
-        time.sleep(delay)
+        time.sleep(fraction * run_duration)
         proc.send_signal(signal.SIGINT)
         sent = time.perf_counter()
         out, err = proc.communicate(timeout=60)
@@ -229,7 +246,7 @@ def test_ctrl_c_stops_a_pipeline_run(small_scene, tmp_path, delay):
     finally:
         if proc.poll() is None:
             proc.kill()
-    assert "finished" not in out, "the run ended before the interrupt: make it longer"
+    assert "finished" not in out, f"the run ended before the interrupt ({run_duration:.1f} s)"
     assert "KeyboardInterrupt" in err, err[-2000:]
     assert latency < RUN_LATENCY, latency
 
