@@ -512,3 +512,20 @@ def test_skeleton_gives_each_joint_its_children() -> None:
             errs[on].append(float(np.linalg.norm(rec.points[:, j] - P[:, j]) / den))
     assert max(errs[True]) < 0.8, errs
     assert min(errs[False]) > 1.2, errs
+
+
+def test_bad_children_are_refused_by_name() -> None:
+    f = 20
+    cams = sc.synth.random_photographers(f, seed=1)
+    parent = np.c_[np.zeros(f), np.zeros(f), np.ones(f)]
+    x = cams.project_trajectory(parent + np.array([0.4, 0.0, 0.0]))
+    cases = [
+        ([(x, -1.0)], r"^children\[0\] length"),
+        ([(x[:5], 0.3)], r"^children\[0\] pixels: expected shape"),
+        ([x], r"^children\[0\]: expected a \(pixels"),
+        ([(x, 0.3, 1)], r"^children\[0\]: expected a \(pixels"),
+        ("ab", r"^children: expected a sequence"),
+    ]
+    for children, message in cases:
+        with pytest.raises(ValueError, match=message):
+            sc.reconstruct_articulated(x, cams, parent, 0.4, k=4, children=children)

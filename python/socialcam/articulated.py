@@ -408,7 +408,12 @@ def reconstruct_articulated(
     p_ = as_float_array(parent, "parent", (f, 3))
     length_ = check_float(length, "length", min=0.0, min_exclusive=True)
     kids = []
-    for c, (xc, lc) in enumerate(children or ()):
+    if isinstance(children, (str, bytes, np.ndarray)):
+        raise ValueError("children: expected a sequence of (pixels, length) pairs")
+    for c, child in enumerate(children or ()):
+        if not isinstance(child, (tuple, list)) or len(child) != 2:
+            raise ValueError(f"children[{c}]: expected a (pixels (F, 2), length) pair")
+        xc, lc = child
         kids.append(
             (
                 as_float_array(xc, f"children[{c}] pixels", (f, 2), allow_nan=True),
