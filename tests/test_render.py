@@ -369,3 +369,45 @@ def test_heads_turn_no_faster_than_people_do(seed):
     t = motion.t[1:]
     outside = (t < calib[0][0] - 0.3) | (t > calib[0][1] + 0.3)
     assert rate[outside].max() < 4.5, np.degrees(rate[outside].max())
+
+
+def _all_hsv() -> np.ndarray:
+    h, s, v = np.meshgrid(np.arange(180), np.arange(256), np.arange(256), indexing="ij")
+    return np.stack([h, s, v], -1).reshape(-1, 3).astype(np.uint8)
+
+
+def test_texture_colours_follow_hsv_within_one_level_everywhere():
+    from socialcam.synth.texture import hsv_to_rgb_u8
+
+    hsv = _all_hsv()
+    got = hsv_to_rgb_u8(hsv).astype(float)
+    # the real-valued HSV→RGB of the same 8-bit convention, in float64
+    h = hsv[:, 0] / 30.0
+    s, v = hsv[:, 1] / 255.0, hsv[:, 2] * 1.0
+    k = np.floor(h).astype(int) % 6
+    f = h - np.floor(h)
+    p, q, t = v * (1 - s), v * (1 - s * f), v * (1 - s * (1 - f))
+    table = np.stack([v, p, q, t], -1)
+    pick = np.array([[0, 3, 1], [2, 0, 1], [1, 0, 3], [1, 2, 0], [3, 1, 0], [0, 1, 2]])[k]
+    exact = np.take_along_axis(table, pick, -1)
+    err = got - exact
+    # truncation: at most one level below (float32 rounding may reach just past a level)
+    assert err.max() <= 1e-6 and err.min() > -1.0 - 1e-6
+    assert hsv_to_rgb_u8([[0, 255, 255], [60, 255, 255], [120, 255, 255]]).tolist() == [
+        [255, 0, 0],
+        [0, 255, 0],
+        [0, 0, 255],
+    ]
+    with pytest.raises(ValueError, match="hsv"):
+        hsv_to_rgb_u8(np.zeros((4, 2)))
+
+
+def test_texture_colour_table_is_pinned():
+    # The rendered test scenes (and the thresholds measured on them) depend on every colour
+    # of this table; it equals OpenCV 4.9–5.0's COLOR_HSV2RGB, and no longer follows OpenCV.
+    import hashlib
+
+    from socialcam.synth.texture import hsv_to_rgb_u8
+
+    digest = hashlib.sha256(hsv_to_rgb_u8(_all_hsv()).tobytes()).hexdigest()
+    assert digest == "cf2763d893cfed37873c3062fb3b644ac3d2c35a59299550e0e82c8f6874eb48"

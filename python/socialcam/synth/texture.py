@@ -34,6 +34,43 @@ _FONTS = (
 )
 
 
+# sector → which of (v, p, q, t) feeds (r, g, b), the six 60° sectors of the hue circle
+_SECTOR_RGB = np.array([[0, 3, 1], [2, 0, 1], [1, 0, 3], [1, 2, 0], [3, 1, 0], [0, 1, 2]])
+
+
+def hsv_to_rgb_u8(hsv: npt.ArrayLike) -> U8Image:
+    """8-bit HSV ``(..., 3)`` (hue in [0, 180), saturation and value in [0, 255], OpenCV's
+    8-bit convention) → 8-bit RGB ``(..., 3)``, computed here in float32 so that rendered
+    scenes do not depend on the OpenCV version.
+
+    The arithmetic is fixed, operation by operation: s = S·(1/255), v = V·(1/255),
+    h = H·(6/180) split into sector ⌊h⌋ and fraction f, p = v·(1 − s),
+    q = v·fma(−s, f, 1), t = v·fma(−s, 1 − f, 1), each channel ×255 and truncated. This
+    reproduces OpenCV 4.9–5.0's ``COLOR_HSV2RGB`` bit for bit on all 180·256·256 inputs;
+    OpenCV 5.1 rounds differently, which changed every rendered test scene by one level
+    (``tests/test_render.py`` pins the table).
+    """
+    a = np.asarray(hsv)
+    if a.shape[-1:] != (3,):
+        raise ValueError(f"hsv: expected shape (..., 3), got {a.shape}")
+    f32, f64 = np.float32, np.float64
+    s = a[..., 1].astype(f32) * f32(1 / 255)
+    v = a[..., 2].astype(f32) * f32(1 / 255)
+    h = a[..., 0].astype(f32) * f32(6 / 180)
+    whole = np.floor(h)
+    frac = h - whole
+    sector = whole.astype(np.int64) % 6
+
+    def fused(x: npt.NDArray[np.float32], y: npt.NDArray[np.float32]) -> npt.NDArray[np.float32]:
+        # 1 − x·y rounded once (x·y is exact in float64), as a fused multiply-add does
+        return (1.0 - x.astype(f64) * y.astype(f64)).astype(f32)
+
+    one = f32(1)
+    table = np.stack([v, v * (one - s), v * fused(s, frac), v * fused(s, one - frac)], axis=-1)
+    rgb = np.take_along_axis(table, _SECTOR_RGB[sector], axis=-1) * f32(255)
+    return np.clip(np.trunc(rgb), 0, 255).astype(np.uint8)
+
+
 def _colour_noise(rng: np.random.Generator, h: int, w: int) -> npt.NDArray[np.float32]:
     """A 1/f-like colour field ``(h, w, 3)`` in [0, 255]: noise added at every octave while
     upsampling from 4 texels to the full size (amplitude × 0.6 per octave)."""
@@ -78,7 +115,7 @@ def procedural_texture(
     sat = rng.uniform(0, 1, n) ** 1.5 * 170
     val = rng.uniform(25, 240, n)
     hsv = np.stack([hue, sat, val], axis=1).astype(np.uint8)[None]
-    rgb = cv2.cvtColor(hsv, cv2.COLOR_HSV2RGB)[0].astype(np.float64)
+    rgb = hsv_to_rgb_u8(hsv[0]).astype(np.float64)
     kind = rng.integers(0, 3, n)
     ang = rng.uniform(0, 180, n)
     ecc = rng.uniform(0.3, 1.0, n)
