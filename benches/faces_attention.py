@@ -9,7 +9,8 @@ to the looked-at eyes, and of the wearers' true ego rays on the same groups (ins
 looked-at heads). Prints per seed: exo/ego ratio, exo and ego errors (m), face gaze error
 (°), face-instants, exo groups and the fraction found, association; then the ``matched``
 scoring (the wearers with an exo ray, their exo rays against their own ego rays on the same
-groups): ratio, exo and ego errors (m), groups, exo and ego found fractions. The summary
+groups): ratio, exo and ego errors (m), groups, exo and ego found fractions, coverage (the
+fraction of the wearers' ego groups scored: ≥ 2 of their members with an exo ray). The summary
 gives the medians over seeds and the pooled ratio (median of every seed's matched exo
 errors over that of the ego errors, found groups only).
 
@@ -46,7 +47,7 @@ def evaluate(out: Path, seed: int, **options: object) -> tuple[float, ...]:
     return (exo / ego, exo, ego, r["gaze_deg"], r["face_instants"], ja["exo"]["groups"],
             ja["exo"]["found_fraction"], r["association"], m["ratio"], m["exo_error_median_m"],
             m["ego_error_median_m"], m["groups"], m["exo_found_fraction"],
-            m["ego_found_fraction"])  # fmt: skip
+            m["ego_found_fraction"], m["coverage"])  # fmt: skip
 
 
 POOL: list[tuple[np.ndarray, np.ndarray]] = []
@@ -62,7 +63,7 @@ def main(argv: list[str]) -> None:
     seeds = [int(a) for a in argv[1:] if "=" not in a] or list(range(1, 13))
     rows = []
     print("seed ratio exo_m ego_m gaze_deg face_instants groups found association | matched: "
-          "ratio exo_m ego_m groups exo_found ego_found")  # fmt: skip
+          "ratio exo_m ego_m groups exo_found ego_found coverage")  # fmt: skip
     for s in seeds:
         rows.append(evaluate(out, s, **opts))
         x = rows[-1]
@@ -79,7 +80,7 @@ def main(argv: list[str]) -> None:
     pooled = np.median(ex[ex <= 0.5]) / np.median(eg[eg <= 0.5])
     within = int((a[np.isfinite(a[:, 8]), 8] <= 1.5).sum())
     print(
-        f"median ratio {med(0)}, gaze {med(3)} deg; matched ratio {med(8)} "
+        f"median ratio {med(0)}, gaze {med(3)} deg; matched ratio {med(8)}, coverage {med(14)} "
         f"({within} of {np.isfinite(a[:, 8]).sum()} <= 1.5), pooled {pooled:.2f} over "
         f"{len(ex)} groups (found exo {np.mean(ex <= 0.5):.2f}, ego {np.mean(eg <= 0.5):.2f})"
     )

@@ -98,7 +98,7 @@ def test_matched_scoring_compares_the_same_wearers(scene):
     """``matched`` scores the exo and ego rays of the same wearers on the same groups: exo
     rays that ARE the ego rays give identical errors, whichever wearers lack an exo ray
     and however wrong the rays of the people without a camera are (which do move the
-    unmatched ``exo`` score)."""
+    unmatched ``exo`` score); ``coverage`` counts the ego groups left out."""
     truth = scene[0]
     owner = {j: j for j in range(truth.face_normal[0].shape[1])}
     base = face_joint_attention(truth, _ego_as_exo(truth, drop=(0, 3)), owner)
@@ -106,6 +106,9 @@ def test_matched_scoring_compares_the_same_wearers(scene):
     assert m["groups"] >= 10, m
     np.testing.assert_allclose(m["exo_errors"], m["ego_errors"], rtol=1e-9)
     assert m["ratio"] == pytest.approx(1.0, rel=1e-9)
+    # coverage: the ego groups scored; every one when every wearer has an exo ray
+    full = face_joint_attention(truth, _ego_as_exo(truth), owner)["matched"]
+    assert full["coverage"] == 1.0 and 0.2 < m["coverage"] < 0.9, (full, m)
     turned = face_joint_attention(truth, _ego_as_exo(truth, drop=(0, 3), people_turn_deg=20), owner)
     np.testing.assert_allclose(turned["matched"]["exo_errors"], m["exo_errors"], rtol=1e-9)
     assert turned["exo"] != base["exo"], (turned["exo"], base["exo"])
