@@ -7,7 +7,8 @@ detect faces in every video (MTCNN), reconstruct with the true camera poses and 
 false detections surviving association, association accuracy, median 3D landmark error
 and median gaze error against the face normal the faces are drawn with; on circles also
 joint attention from the exo rays against the wearers' ego rays
-(``face_joint_attention``). Slow (≈ 8 min per seed on a loaded 2-core machine).
+(``face_joint_attention``; ``ja_matched_ratio``: the same wearers' exo and ego rays on the
+same groups). Slow (≈ 8 min per seed on a loaded 2-core machine).
 
 Run: python benches/faces_accuracy.py OUT_DIR loop|circle [seed ...]
 """
@@ -39,6 +40,7 @@ def evaluate(out: Path, arrangement: str, seed: int) -> dict[str, float]:
     return out_ | {
         "ja_exo_m": ja["exo"]["error_median_m"],
         "ja_ego_m": ja["ego"]["error_median_m"],
+        "ja_matched_ratio": ja["matched"]["ratio"],
         "landmark_mm_not_rigid": float(plain["landmark_mm"]),
         "gaze_deg_not_rigid": float(plain["gaze_deg"]),
     }

@@ -7,7 +7,12 @@ face size noise), ``reconstruct_faces`` with the true poses, then
 ``synth.evaluate.face_joint_attention``: the median distance of the charges of the exo rays
 to the looked-at eyes, and of the wearers' true ego rays on the same groups (instants and
 looked-at heads). Prints per seed: exo/ego ratio, exo and ego errors (m), face gaze error
-(°), face-instants, exo groups and the fraction found, association.
+(°), face-instants, exo groups and the fraction found, association; then the ``matched``
+scoring (the wearers with an exo ray, their exo rays against their own ego rays on the same
+groups): ratio, exo and ego errors (m), groups, exo and ego found fractions, coverage (the
+fraction of the wearers' ego groups scored: ≥ 2 of their members with an exo ray). The summary
+gives the medians over seeds and the pooled ratio (median of every seed's matched exo
+errors over that of the ego errors, found groups only).
 
 Run: python benches/faces_attention.py OUT_DIR [seed ...] [option=value ...]
 (options are ``FaceOptions`` fields, e.g. ``rigid_turn_rate=0.25``)
@@ -37,8 +42,15 @@ def evaluate(out: Path, seed: int, **options: object) -> tuple[float, ...]:
     r = faces_vs_truth(scaled, dets, f3)
     ja = face_joint_attention(truth, f3, r["owner"])
     exo, ego = ja["exo"]["error_median_m"], ja["ego_same_groups"]["error_median_m"]
+    m = ja["matched"]
+    POOL.append((m["exo_errors"], m["ego_errors"]))
     return (exo / ego, exo, ego, r["gaze_deg"], r["face_instants"], ja["exo"]["groups"],
-            ja["exo"]["found_fraction"], r["association"])  # fmt: skip
+            ja["exo"]["found_fraction"], r["association"], m["ratio"], m["exo_error_median_m"],
+            m["ego_error_median_m"], m["groups"], m["exo_found_fraction"],
+            m["ego_found_fraction"], m["coverage"])  # fmt: skip
+
+
+POOL: list[tuple[np.ndarray, np.ndarray]] = []
 
 
 def main(argv: list[str]) -> None:
@@ -50,13 +62,28 @@ def main(argv: list[str]) -> None:
             opts[k] = None if v == "None" else (v == "True" if v in ("True", "False") else float(v))
     seeds = [int(a) for a in argv[1:] if "=" not in a] or list(range(1, 13))
     rows = []
-    print("seed ratio exo_m ego_m gaze_deg face_instants groups found association")
+    print("seed ratio exo_m ego_m gaze_deg face_instants groups found association | matched: "
+          "ratio exo_m ego_m groups exo_found ego_found coverage")  # fmt: skip
     for s in seeds:
         rows.append(evaluate(out, s, **opts))
-        print(s, " ".join(f"{x:.3f}" for x in rows[-1]), flush=True)
+        x = rows[-1]
+        print(s, " ".join(f"{v:.3f}" for v in x[:8]), "|", " ".join(f"{v:.3f}" for v in x[8:]),
+              flush=True)  # fmt: skip
     a = np.array(rows)
-    print(f"median ratio {np.median(a[:, 0]):.2f} [{a[:, 0].min():.2f}-{a[:, 0].max():.2f}], "
-          f"gaze {np.median(a[:, 3]):.2f} [{a[:, 3].min():.2f}-{a[:, 3].max():.2f}] deg")  # fmt: skip
+
+    def med(i: int) -> str:
+        c = a[np.isfinite(a[:, i]), i]
+        return f"{np.median(c):.2f} [{c.min():.2f}-{c.max():.2f}]" if len(c) else "nan"
+
+    ex = np.concatenate([e for e, _ in POOL])
+    eg = np.concatenate([g for _, g in POOL])
+    pooled = np.median(ex[ex <= 0.5]) / np.median(eg[eg <= 0.5])
+    within = int((a[np.isfinite(a[:, 8]), 8] <= 1.5).sum())
+    print(
+        f"median ratio {med(0)}, gaze {med(3)} deg; matched ratio {med(8)}, coverage {med(14)} "
+        f"({within} of {np.isfinite(a[:, 8]).sum()} <= 1.5), pooled {pooled:.2f} over "
+        f"{len(ex)} groups (found exo {np.mean(ex <= 0.5):.2f}, ego {np.mean(eg <= 0.5):.2f})"
+    )
 
 
 if __name__ == "__main__":

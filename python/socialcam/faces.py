@@ -818,6 +818,68 @@ def _instants(cams: Sequence[Any], tol: float | None) -> tuple[FloatArray, list[
     return times, frames
 
 
+def _anchored_reprojection_test(
+    cams: Sequence[FloatArray],
+    slot: IntArray,
+    uv: FloatArray,
+    size: FloatArray,
+    grp: IntArray,
+    g_anchor: IntArray,
+    X: FloatArray,
+    o: FaceOptions,
+) -> tuple[IntArray, bool]:
+    """Eq 3.2 (a) with the reprojection test of (b): an anchor claims detections by where
+    they lie in each image alone, so a face further along the same line of sight (a person
+    behind the wearer, seen past the wearer's turned head) can join the wearer's group.
+    An anchored group seen by ≥ 2 cameras whose triangulation (``X (G, 5, 3)``, Eq 3.3)
+    fails the test for a member (RMS reprojection error over ``rel_threshold`` × face size,
+    at least ``min_threshold`` pixels; as for RANSAC groups) keeps the largest set of its
+    members that the triangulation of a pair of them reprojects within the test (ties: the
+    smaller error relative to the thresholds); the others leave it (no pair passing: all
+    leave, the face is not reconstructed at that instant). Returns the new ``grp`` and
+    whether it changed."""
+    from itertools import combinations
+
+    from socialcam import _core
+
+    K, R, C = cams
+    grp = grp.copy()
+    thr = np.maximum(o.rel_threshold * size, o.min_threshold)
+    sigma = np.maximum(o.min_noise, o.landmark_noise * size)
+
+    def scaled_rms(x: FloatArray, mem: IntArray) -> FloatArray:
+        Xc = np.einsum("mij,mpj->mpi", R[slot[mem]], x[None] - C[slot[mem]][:, None])
+        f = np.stack([K[slot[mem], 0, 0], K[slot[mem], 1, 1]], -1)[:, None]
+        z = Xc[..., 2:]
+        u = Xc[..., :2] / np.where(z > 0, z, np.nan) * f + K[slot[mem], None, :2, 2]
+        rms = np.sqrt(np.mean(np.sum((u - uv[mem]) ** 2, axis=-1), axis=-1))
+        return np.asarray(np.nan_to_num(rms / thr[mem], nan=np.inf), np.float64)
+
+    changed = False
+    for g in np.nonzero(g_anchor >= 0)[0]:
+        mem = np.nonzero(grp == g)[0]
+        if len(mem) < 2 or (np.isfinite(X[g]).all() and scaled_rms(X[g], mem).max() <= 1.0):
+            continue
+        best: tuple[int, float, IntArray] = (0, np.inf, mem[:0])
+        for a, b in combinations(mem, 2):
+            pair = np.array([a, b])
+            xs, _s, _r, _n = _core.face_triangulate(
+                K, R, C, slot[pair], np.ascontiguousarray(uv[pair]), sigma[pair],
+                np.zeros(2, np.int64),
+            )  # fmt: skip
+            if not np.isfinite(xs[0]).all():
+                continue
+            e = scaled_rms(xs[0], mem)
+            ok = e <= 1.0
+            if ok[mem == a][0] and ok[mem == b][0]:
+                cand = (int(ok.sum()), float(e[ok].sum()), mem[ok])
+                if cand[0] > best[0] or (cand[0] == best[0] and cand[1] < best[1]):
+                    best = cand
+        grp[np.setdiff1d(mem, best[2])] = -1
+        changed = True
+    return grp, changed
+
+
 def reconstruct_faces(
     detections: Sequence[FaceDetections],
     cameras: Sequence[Any],
@@ -973,6 +1035,20 @@ def reconstruct_faces(
         X, S, _rms, nviews = _core.face_triangulate(
             cams_t[0], cams_t[1], cams_t[2], local[slot_[rows_t]], lm_[rows_t], sigma[rows_t], grp
         )
+        if anchors:  # the anchored groups pass the reprojection test of the RANSAC groups
+            grp, changed = _anchored_reprojection_test(
+                cams_t, local[slot_[rows_t]], lm_[rows_t], size_[rows_t], grp, g_anchor, X, o
+            )
+            if changed:
+                X, S, _rms, nviews = _core.face_triangulate(
+                    cams_t[0], cams_t[1], cams_t[2], local[slot_[rows_t]], lm_[rows_t],
+                    sigma[rows_t], grp,
+                )  # fmt: skip
+                if len(nviews) < len(g_anchor):  # the last groups lost every member
+                    pad = len(g_anchor) - len(nviews)
+                    X = np.concatenate([X, np.full((pad, 5, 3), np.nan)])
+                    S = np.concatenate([S, np.full((pad, 5), np.nan)])
+                    nviews = np.concatenate([nviews, np.zeros(pad, nviews.dtype)])
         claimed: set[int] = set()
         # faces seen by several cameras first (anchored before RANSAC groups), then the
         # anchored faces seen by one camera
