@@ -556,6 +556,25 @@ def test_joint_window_moves_pairs_together(seed):
     assert right >= 0.95 and err <= 1.25 * oerr
 
 
+@pytest.mark.parametrize("seed", [211, 216, 605])
+def test_joint_window_extends_groups_to_where_they_formed(seed):
+    """Marker scenes where the window's search, holding the positions, missed a group for
+    a stretch of frames (the objective of the true assignment is higher: 4347 against
+    4224, 4326 against 4312, 3070 against 2980): a source seen only after its group
+    formed (211: frames 0–8, 216: frames 28–41, no position or one extrapolated from
+    one side) or a pair that leaves its source at the end (605: frames 92–99). The
+    extension moves (a group switching together moved to where it formed, or on to the
+    end, its sources refitted and scored by the objective) reach it. Measured at 100
+    frames (right count, error/oracle): 1.00 / 0.23, 1.00 / 0.51, 1.00 / 0.28; without
+    them 0.91, 0.86 and 0.92 right."""
+    scene = synth.marker_check_family(seed, n_frames=100)
+    right, err, oerr = scene.charge_scores(
+        sc.find_charges_sequence(scene.ray_frames(), bounds=tuple(scene.room))
+    )
+    print(f"seed {seed}: right {right:.2f}, error/oracle {err / oerr:.2f}")
+    assert right >= 0.97 and err <= 1.25 * oerr
+
+
 def test_joint_window_follows_people_by_id():
     """The window follows a person over frames by person id, not by row. Held-out seed
     118 with the rows of every frame shuffled: with the ids along, the issue target holds

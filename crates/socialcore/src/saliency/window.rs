@@ -35,7 +35,11 @@
 //! present, one per round, so that rays split over two copies of one target meet at the
 //! other), then every pair of people is decoded jointly given the others (pair moves: a
 //! new pair whose members each alone would make no charge changes target together), and
-//! sources are dropped one at a time while the objective grows. The
+//! sources are dropped one at a time while the objective grows. When the rounds settle,
+//! an extension move (see `Model::extend`) moves a group that changes target together
+//! to where it formed, or on to where it breaks up, with the sources it touches refitted
+//! (the rounds hold the positions, so a source seen only after its group formed never
+//! gains the frames before), and the rounds run again from the best one. The
 //! objective is that of the assignment returned, every term from it: a ray of a source
 //! with fewer than `min_members` rays attends none (gains nothing), and a source that keeps
 //! no ray pays no Occam cost and carries no one. Refitting the positions may lower it, so
@@ -51,6 +55,8 @@ use rayon::prelude::*;
 
 /// Rounds of (fit positions, decode, drop sources).
 const ROUNDS: usize = 4;
+/// Most extension moves (see [`Model::extend`]) of a search, each followed by rounds.
+const EXTENSIONS: usize = 4;
 /// Most rounds of decoding while `K_t` and the `min_members` rule settle.
 const DECODE_ROUNDS: usize = 8;
 /// A pair move considers, per person and frame, the sources whose gain is within this
@@ -116,6 +122,42 @@ struct Model<'a> {
 type Positions = Vec<Vec<Fit>>;
 /// `z[t][row]`: the source a frame's ray attends.
 type Assign = Vec<Vec<Option<usize>>>;
+
+impl<'a> Model<'a> {
+    /// The model of `frames` (people followed by id across frames).
+    fn new(frames: &'a [GazeRays], opts: &'a ModeOptions) -> Self {
+        let mut people: Vec<i64> = frames
+            .iter()
+            .flat_map(|r| r.ids().iter().copied())
+            .collect();
+        people.sort_unstable();
+        people.dedup();
+        let row: Vec<Vec<Option<usize>>> = frames
+            .iter()
+            .map(|r| {
+                let mut out = vec![None; people.len()];
+                for (i, id) in r.ids().iter().enumerate() {
+                    if let Ok(p) = people.binary_search(id) {
+                        out[p] = Some(i);
+                    }
+                }
+                out
+            })
+            .collect();
+        let volume = match &opts.bounds {
+            Some((lo, hi)) => (hi - lo).iter().map(|e| e.max(1e-3)).product::<f64>(),
+            None => opts.depth_max.powi(3),
+        };
+        Model {
+            frames,
+            opts,
+            row,
+            n_people: people.len(),
+            ln_volume: volume.ln(),
+            prior: ((1.0 - opts.unattended) / opts.unattended).ln(),
+        }
+    }
+}
 
 impl Model<'_> {
     /// Links the per-frame charges `stage` (member rows) into sources (at most
@@ -200,10 +242,22 @@ impl Model<'_> {
     /// table-tennis ball — leaves the wide fit outside the narrow fits' confidence
     /// ellipsoids, and its position is then taken from the narrower fit).
     fn fit(&self, z: &Assign, k: usize, prev: &[Fit]) -> Vec<Fit> {
-        let f = self.frames.len();
+        self.fit_frames(z, k, prev, 0..self.frames.len())
+    }
+
+    /// [`Model::fit`] at the frames `range` only (the bandwidth rule decided on them);
+    /// the other frames keep `prev`.
+    fn fit_frames(
+        &self,
+        z: &Assign,
+        k: usize,
+        prev: &[Fit],
+        range: std::ops::Range<usize>,
+    ) -> Vec<Fit> {
         let has: Vec<bool> = z.iter().map(|zt| zt.contains(&Some(k))).collect();
         let taus = bandwidths(self.opts.pool_frames);
-        let fits: Vec<Vec<Fit>> = (0..f)
+        let start = range.start;
+        let fits: Vec<Vec<Fit>> = range
             .map(|t| {
                 taus.iter()
                     .map(|&tau| self.fit_at(z, k, &has, prev, t, tau))
@@ -214,13 +268,14 @@ impl Model<'_> {
         let n = picks.iter().flatten().count();
         let rejected = picks.iter().flatten().filter(|&&j| j > 0).count();
         let adapt = rejected as f64 > ADAPT_FRACTION * n as f64;
-        fits.into_iter()
-            .zip(picks)
-            .map(|(ft, j)| match (adapt, j) {
+        let mut out = prev.to_vec();
+        for (j, (ft, pick)) in fits.into_iter().zip(picks).enumerate() {
+            out[start + j] = match (adapt, pick) {
                 (true, Some(j)) => ft[j],
-                _ => ft[0].or(j.and_then(|j| ft[j])),
-            })
-            .collect()
+                _ => ft[0].or(pick.and_then(|j| ft[j])),
+            };
+        }
+        out
     }
 
     /// The fit of source `k` at frame `t` with lag bandwidth `tau` (frames): the position
@@ -826,6 +881,224 @@ impl Model<'_> {
         self.ln_volume - 1.5 * std::f64::consts::TAU.ln() + 0.5 * med
     }
 
+    /// The search from the assignment `z` over `n_sources` sources: rounds of (fit the
+    /// positions, decode, drop sources) until the assignment settles; the best round.
+    fn search(&self, mut z: Assign, n_sources: usize) -> Result<Round> {
+        let f = self.frames.len();
+        let mut alive = vec![true; n_sources];
+        let mut pos: Positions = vec![vec![None; f]; n_sources];
+        let mut rounds: Vec<Round> = Vec::new();
+        let (mut round, mut extensions) = (0, 0);
+        while round < ROUNDS {
+            round += 1;
+            pos = (0..alive.len())
+                .into_par_iter()
+                .map(|k| {
+                    if alive[k] {
+                        self.fit(&z, k, &pos[k])
+                    } else {
+                        vec![None; f]
+                    }
+                })
+                .collect();
+            let (mut best_z, ll) = self.solve(&z, &pos, &alive)?;
+            // Sources that explain no ray go first (they cost nothing and change nothing).
+            for (k, a) in alive.iter_mut().enumerate() {
+                *a = *a && best_z.iter().any(|zt| zt.contains(&Some(k)));
+            }
+            let mut best = self.objective(&best_z, &pos, &alive, ll);
+            // Then one drop at a time while the likelihood grows.
+            loop {
+                let mut pick: Option<(usize, f64, Assign)> = None;
+                let live: Vec<usize> = (0..alive.len()).filter(|&k| alive[k]).collect();
+                for k in live {
+                    alive[k] = false;
+                    let (z2, ll2) = self.solve(&z, &pos, &alive)?;
+                    let j = self.objective(&z2, &pos, &alive, ll2);
+                    alive[k] = true;
+                    if j > best + 1e-9 && pick.as_ref().map_or(true, |p| j > p.1) {
+                        pick = Some((k, j, z2));
+                    }
+                }
+                match pick {
+                    Some((k, j, z2)) => {
+                        alive[k] = false;
+                        best = j;
+                        best_z = z2;
+                    }
+                    None => break,
+                }
+            }
+            let done = best_z == z;
+            rounds.push((best, best_z.clone(), pos.clone(), alive.clone()));
+            if done || round == ROUNDS {
+                // Settled: an extension move, then rounds again from it.
+                if extensions == EXTENSIONS {
+                    break;
+                }
+                let Some(moved) = self.extend(&best_z, &pos, &alive)? else {
+                    break;
+                };
+                extensions += 1;
+                round = 0;
+                best_z = moved.1.clone();
+                (pos, alive) = (moved.2.clone(), moved.3.clone());
+                rounds.push(moved);
+            }
+            z = best_z;
+        }
+        Ok(best_round(rounds).unwrap_or((f64::NEG_INFINITY, z, pos, alive)))
+    }
+
+    /// Each person's states (0 = none, `k + 1` = source `k`) in assignment `z`; a frame
+    /// where the person is absent carries the state of the frame before (of the first
+    /// frame present, before it).
+    fn paths_of(&self, z: &Assign) -> Vec<Vec<usize>> {
+        let f = self.frames.len();
+        (0..self.n_people)
+            .map(|p| {
+                let mut path: Vec<Option<usize>> = (0..f)
+                    .map(|t| self.row[t][p].map(|i| z[t][i].map_or(0, |k| k + 1)))
+                    .collect();
+                let first = path.iter().flatten().next().copied().unwrap_or(0);
+                let mut last = first;
+                path.iter_mut()
+                    .map(|s| {
+                        last = s.unwrap_or(last);
+                        last
+                    })
+                    .collect()
+            })
+            .collect()
+    }
+
+    /// The assignment of each person's states `paths`.
+    fn assign_of(&self, paths: &[Vec<usize>]) -> Assign {
+        let mut out: Assign = self.frames.iter().map(|r| vec![None; r.len()]).collect();
+        for (p, path) in paths.iter().enumerate() {
+            for (t, &s) in path.iter().enumerate() {
+                if let Some(i) = self.row[t][p] {
+                    out[t][i] = s.checked_sub(1);
+                }
+            }
+        }
+        out
+    }
+
+    /// Extension moves: a group that changes target together at frame `t` (the people
+    /// present who switch into source `k` there, or out of it) is moved as if it had
+    /// switched earlier (into `k`) or later (out of `k`): to the edge of `k`'s run as a
+    /// charge and, for a group of `min_members` or more, to the group's neighbouring
+    /// change of state (the sequence's edge if there is none). Unlike the decoding and
+    /// the pair moves, which hold the positions, each proposal refits the sources it
+    /// touches (at the frames within `pool_frames` of the moved ones) and is scored by
+    /// the objective: a source seen only after its group formed (its position unknown
+    /// before, or extrapolated from one side) gains the frames where the group already
+    /// looked at it, and a group split over two copies of its target meets at one.
+    /// Returns the proposal with the highest objective if it beats that of `z`.
+    fn extend(&self, z: &Assign, pos: &Positions, alive: &[bool]) -> Result<Option<Round>> {
+        let f = self.frames.len();
+        let min = self.opts.min_members;
+        let paths = self.paths_of(z);
+        let ns = alive.len();
+        let base = self.objective(z, pos, alive, self.likelihood(&paths, pos));
+        let present = |q: usize, t: usize| self.row[t][q].is_some();
+        let charge_at = |k: usize, t: usize| {
+            (0..self.n_people)
+                .filter(|&q| present(q, t) && paths[q][t] == k + 1)
+                .count()
+                >= min
+        };
+        // A person's changes of state, as frames `t` with `paths[t − 1] != paths[t]`.
+        let changes: Vec<Vec<usize>> = paths
+            .iter()
+            .map(|path| (1..f).filter(|&t| path[t - 1] != path[t]).collect())
+            .collect();
+        // Proposals: (source k, people, frames [lo, hi)).
+        let mut props: Vec<(usize, Vec<usize>, usize, usize)> = Vec::new();
+        for t in 1..f {
+            for k in (0..ns).filter(|&k| alive[k]) {
+                let s = k + 1;
+                let into: Vec<usize> = (0..self.n_people)
+                    .filter(|&q| present(q, t) && paths[q][t] == s && paths[q][t - 1] != s)
+                    .collect();
+                let out: Vec<usize> = (0..self.n_people)
+                    .filter(|&q| present(q, t) && paths[q][t - 1] == s && paths[q][t] != s)
+                    .collect();
+                if !into.is_empty() {
+                    let mut starts = Vec::new();
+                    if let Some(a) = (0..t).rev().take_while(|&u| charge_at(k, u)).last() {
+                        starts.push(a);
+                    }
+                    if into.len() >= min {
+                        let prev = into
+                            .iter()
+                            .filter_map(|&q| changes[q].iter().rev().find(|&&u| u < t).copied())
+                            .max();
+                        starts.push(prev.unwrap_or(0));
+                    }
+                    for lo in starts {
+                        props.push((k, into.clone(), lo, t));
+                    }
+                }
+                if !out.is_empty() {
+                    let mut ends = Vec::new();
+                    if let Some(b) = (t..f).take_while(|&u| charge_at(k, u)).last() {
+                        ends.push(b + 1);
+                    }
+                    if out.len() >= min {
+                        let next = out
+                            .iter()
+                            .filter_map(|&q| changes[q].iter().find(|&&u| u > t).copied())
+                            .min();
+                        ends.push(next.unwrap_or(f));
+                    }
+                    for hi in ends {
+                        props.push((k, out.clone(), t, hi));
+                    }
+                }
+            }
+        }
+        props.sort();
+        props.dedup();
+        let mut best: Option<Round> = None;
+        for (k, group, lo, hi) in props {
+            crate::interrupt::check()?;
+            let mut trial = paths.clone();
+            let mut touched = vec![false; ns];
+            touched[k] = true;
+            for t in lo..hi {
+                for &q in &group {
+                    if present(q, t) {
+                        if trial[q][t] > 0 {
+                            touched[trial[q][t] - 1] = true;
+                        }
+                        trial[q][t] = k + 1;
+                    }
+                }
+            }
+            if trial == paths {
+                continue;
+            }
+            self.clean(&mut trial, ns);
+            let z2 = self.assign_of(&trial);
+            let mut pos2 = pos.clone();
+            let w = self.opts.pool_frames;
+            let range = lo.saturating_sub(w)..(hi + w).min(f);
+            for j in (0..ns).filter(|&j| touched[j]) {
+                pos2[j] = self.fit_frames(&z2, j, &pos[j], range.clone());
+            }
+            let alive2: Vec<bool> = (0..ns)
+                .map(|j| alive[j] && z2.iter().any(|zt| zt.contains(&Some(j))))
+                .collect();
+            let j = self.objective(&z2, &pos2, &alive2, self.likelihood(&trial, &pos2));
+            if j > base + 1e-9 && best.as_ref().map_or(true, |b| j > b.0) {
+                best = Some((j, z2, pos2, alive2));
+            }
+        }
+        Ok(best)
+    }
+
     fn objective(&self, z: &Assign, pos: &Positions, alive: &[bool], ll: f64) -> f64 {
         ll - (0..alive.len())
             .filter(|&k| alive[k])
@@ -929,89 +1202,9 @@ pub(super) fn joint_window(
     opts: &ModeOptions,
 ) -> Result<Vec<Vec<Found>>> {
     let f = frames.len();
-    let mut people: Vec<i64> = frames
-        .iter()
-        .flat_map(|r| r.ids().iter().copied())
-        .collect();
-    people.sort_unstable();
-    people.dedup();
-    let row: Vec<Vec<Option<usize>>> = frames
-        .iter()
-        .map(|r| {
-            let mut out = vec![None; people.len()];
-            for (i, id) in r.ids().iter().enumerate() {
-                if let Ok(p) = people.binary_search(id) {
-                    out[p] = Some(i);
-                }
-            }
-            out
-        })
-        .collect();
-    let (mut z, n_sources) = Model::link(frames, stage, opts);
-    let volume = match &opts.bounds {
-        Some((lo, hi)) => (hi - lo).iter().map(|e| e.max(1e-3)).product::<f64>(),
-        None => opts.depth_max.powi(3),
-    };
-    let model = Model {
-        frames,
-        opts,
-        row,
-        n_people: people.len(),
-        ln_volume: volume.ln(),
-        prior: ((1.0 - opts.unattended) / opts.unattended).ln(),
-    };
-    let mut alive = vec![true; n_sources];
-    let mut pos: Positions = vec![vec![None; f]; n_sources];
-    let mut rounds: Vec<Round> = Vec::new();
-    for _ in 0..ROUNDS {
-        pos = (0..alive.len())
-            .into_par_iter()
-            .map(|k| {
-                if alive[k] {
-                    model.fit(&z, k, &pos[k])
-                } else {
-                    vec![None; f]
-                }
-            })
-            .collect();
-        let (mut best_z, ll) = model.solve(&z, &pos, &alive)?;
-        // Sources that explain no ray go first (they cost nothing and change nothing).
-        for (k, a) in alive.iter_mut().enumerate() {
-            *a = *a && best_z.iter().any(|zt| zt.contains(&Some(k)));
-        }
-        let mut best = model.objective(&best_z, &pos, &alive, ll);
-        // Then one drop at a time while the likelihood grows.
-        loop {
-            let mut pick: Option<(usize, f64, Assign)> = None;
-            let live: Vec<usize> = (0..alive.len()).filter(|&k| alive[k]).collect();
-            for k in live {
-                alive[k] = false;
-                let (z2, ll2) = model.solve(&z, &pos, &alive)?;
-                let j = model.objective(&z2, &pos, &alive, ll2);
-                alive[k] = true;
-                if j > best + 1e-9 && pick.as_ref().map_or(true, |p| j > p.1) {
-                    pick = Some((k, j, z2));
-                }
-            }
-            match pick {
-                Some((k, j, z2)) => {
-                    alive[k] = false;
-                    best = j;
-                    best_z = z2;
-                }
-                None => break,
-            }
-        }
-        let done = best_z == z;
-        rounds.push((best, best_z.clone(), pos.clone(), alive.clone()));
-        if done {
-            break;
-        }
-        z = best_z;
-    }
-    if let Some((_, zk, pk, ak)) = best_round(rounds) {
-        (z, pos, alive) = (zk, pk, ak);
-    }
+    let model = Model::new(frames, opts);
+    let (z, n_sources) = Model::link(frames, stage, opts);
+    let (_, z, pos, alive) = model.search(z, n_sources)?;
     Ok((0..f)
         .map(|t| {
             (0..alive.len())
@@ -1177,6 +1370,32 @@ mod tests {
         let mut paths = start.clone();
         m.pair_moves(&mut paths, &pos, &[true, true]).unwrap();
         assert!(paths == merged || paths == vec![vec![2; 6]; 4], "{paths:?}");
+    }
+
+    #[test]
+    fn extension_moves_reach_a_group_seen_only_far_from_where_it_formed() {
+        // 0 and 1 look at a target at the origin, 2 and 3 at one 2 m away, for 60 frames.
+        // The search starts where the second group was seen only in the last 10 frames
+        // (in the first ones: 2 counted with the first group, 3 with none). Each round's
+        // decoding reaches `pool_frames` further back (positions exist only within
+        // `pool_frames` of the rays a source has), so rounds alone leave frames 0–9 wrong;
+        // the extension move moves the pair back to where it formed (the sequence start),
+        // refits and scores it. Reversed in time, the pair is moved on to the end.
+        let (n, cut) = (60, 50);
+        let (frames, _) = pair_scene(Vector3::new(0.0, 2.0, 0.0), 0.05, n);
+        let opts = ModeOptions::default();
+        let m = model(&frames, &opts);
+        for reversed in [false, true] {
+            let at = |t: usize| if reversed { n - 1 - t } else { t };
+            let mut z: Assign = vec![vec![Some(0), Some(0), Some(0), None]; n];
+            for t in cut..n {
+                z[at(t)] = vec![Some(0), Some(0), Some(1), Some(1)];
+            }
+            let (_, out, _, alive) = m.search(z, 2).unwrap();
+            let truth = vec![vec![Some(0), Some(0), Some(1), Some(1)]; n];
+            assert_eq!(alive, vec![true, true]);
+            assert_eq!(out, truth, "reversed: {reversed}");
+        }
     }
 
     #[test]
