@@ -37,6 +37,14 @@ pub(crate) struct Mixing {
     start: Vec<usize>,
     col: Vec<u32>,
     val: Vec<f64>,
+    /// The part of `val` from the rows `adj` of the last load (the extra entries added on
+    /// top of it by [`Mixing::reweight`]).
+    base_val: Vec<f64>,
+    /// Per free row, from `adj` only: `W_ij` for every free `j`, `2 W_ij` for every `j`
+    /// fixed to one (in row order, starting at `base_start[i]`), summed onto `h_i` by
+    /// [`Mixing::reweight`] in the order a full load would.
+    base_terms: Vec<f64>,
+    base_start: Vec<usize>,
     /// Scratch of [`Mixing::load`]: position of a column in the row being built.
     pos: Vec<u32>,
     ext: Extra,
@@ -50,19 +58,36 @@ pub(crate) struct Stop<'a> {
     pub clock: &'a Clock,
 }
 
-/// Extra pair entries bucketed by row (scratch of [`Mixing::load`]).
+/// Extra pair entries bucketed by row (scratch of [`Mixing::load`]), and where each one
+/// lands in the compressed rows (for [`Mixing::reweight`]).
 #[derive(Default)]
 struct Extra {
     start: Vec<usize>,
     fill: Vec<usize>,
-    entries: Vec<(usize, f64)>,
+    /// Per row: (column, `2e` or `2e + 1` for the entry `e` read from its first or second
+    /// variable's row).
+    entries: Vec<(u32, u32)>,
+    /// For `2e` (row `a` of the entry `(a, b, w)`) and `2e + 1` (row `b`): the slot in
+    /// `col`/`val`, or [`ONE_SLOT`] (the other variable is fixed to one: the entry goes to
+    /// the linear row), or [`NO_SLOT`] (this row is fixed or the other variable is zero).
+    slot: Vec<u32>,
 }
+
+const NO_SLOT: u32 = u32::MAX;
+const ONE_SLOT: u32 = u32::MAX - 1;
 
 impl Mixing {
     /// Random unit rows (fixed seed), rank `⌈√(2(n+1))⌉ + 1`.
     pub fn new(n: usize) -> Self {
         let m = n + 1;
         let rank = ((2.0 * m as f64).sqrt().ceil() as usize + 1).min(m).max(2);
+        Self::with_rank(n, rank)
+    }
+
+    /// Random unit rows (fixed seed) of the given rank.
+    pub fn with_rank(n: usize, rank: usize) -> Self {
+        let m = n + 1;
+        let rank = rank.min(m).max(2);
         let k = rank.div_ceil(4) * 4;
         let mut rng = ChaCha8Rng::seed_from_u64(0x05ee_db0b);
         let mut v = vec![0.0; m * k];
@@ -86,6 +111,9 @@ impl Mixing {
             start: Vec::with_capacity(n + 1),
             col: Vec::new(),
             val: Vec::new(),
+            base_val: Vec::new(),
+            base_terms: Vec::new(),
+            base_start: Vec::new(),
             pos: Vec::new(),
             ext: Extra::default(),
         }
@@ -120,6 +148,8 @@ impl Mixing {
     /// Loads the SDP of the node `fix` of `f(b) = Σ h_i b_i + Σ_{i≠j} W_ij b_i b_j`, with
     /// `W` given by the rows `adj` plus `extra` entries `(a, b, w)`, each adding `w` to
     /// `W_ab` and `W_ba` (the pair terms of Lagrangian cuts: no dense matrix is built).
+    /// The compressed rows keep a slot for every extra entry, so that
+    /// [`Mixing::reweight`] can change `h` and the extra weights in place.
     pub(crate) fn load(
         &mut self,
         h: &[f64],
@@ -128,7 +158,7 @@ impl Mixing {
         fix: &[i8],
     ) {
         let n = h.len();
-        // The extra entries bucketed by row (both directions).
+        // The extra entries bucketed by row (both directions), with their index.
         let ext = &mut self.ext;
         ext.start.clear();
         ext.start.resize(n + 1, 0);
@@ -139,52 +169,99 @@ impl Mixing {
         for i in 0..n {
             ext.start[i + 1] += ext.start[i];
         }
-        ext.entries.resize(2 * extra.len(), (0, 0.0));
+        ext.entries.resize(2 * extra.len(), (0, 0));
         ext.fill.clear();
         ext.fill.extend_from_slice(&ext.start[..n]);
-        for &(a, b, w) in extra {
-            ext.entries[ext.fill[a]] = (b, w);
+        for (e, &(a, b, _)) in extra.iter().enumerate() {
+            ext.entries[ext.fill[a]] = (b as u32, 2 * e as u32);
             ext.fill[a] += 1;
-            ext.entries[ext.fill[b]] = (a, w);
+            ext.entries[ext.fill[b]] = (a as u32, 2 * e as u32 + 1);
             ext.fill[b] += 1;
         }
+        ext.slot.clear();
+        ext.slot.resize(2 * extra.len(), NO_SLOT);
         self.start.clear();
         self.col.clear();
-        self.val.clear();
-        const NONE: u32 = u32::MAX;
-        self.pos.resize(n, NONE);
+        self.base_val.clear();
+        self.base_terms.clear();
+        self.base_start.clear();
+        self.pos.resize(n, NO_SLOT);
         for i in 0..n {
             self.start.push(self.col.len());
+            self.base_start.push(self.base_terms.len());
             if fix[i] != FREE {
-                self.lin[i] = 0.0;
                 continue;
             }
             let row0 = self.col.len();
-            let mut acc = h[i];
-            let own = &ext.entries[ext.start[i]..ext.start[i + 1]];
-            for &(j, w) in adj[i].iter().chain(own) {
+            let mut slot_of = |j: usize, col: &mut Vec<u32>, val: &mut Vec<f64>| {
+                let p = self.pos[j];
+                if p == NO_SLOT {
+                    self.pos[j] = col.len() as u32;
+                    col.push(j as u32);
+                    val.push(0.0);
+                    col.len() as u32 - 1
+                } else {
+                    p
+                }
+            };
+            for &(j, w) in &adj[i] {
                 match fix[j] {
                     FREE => {
-                        acc += w;
-                        let p = self.pos[j];
-                        if p == NONE {
-                            self.pos[j] = self.col.len() as u32;
-                            self.col.push(j as u32);
-                            self.val.push(0.25 * w);
-                        } else {
-                            self.val[p as usize] += 0.25 * w;
-                        }
+                        self.base_terms.push(w);
+                        let p = slot_of(j, &mut self.col, &mut self.base_val);
+                        self.base_val[p as usize] += 0.25 * w;
                     }
-                    1 => acc += 2.0 * w,
+                    1 => self.base_terms.push(2.0 * w),
                     _ => {}
                 }
             }
-            for &j in &self.col[row0..] {
-                self.pos[j as usize] = NONE;
+            for &(j, code) in &ext.entries[ext.start[i]..ext.start[i + 1]] {
+                ext.slot[code as usize] = match fix[j as usize] {
+                    FREE => slot_of(j as usize, &mut self.col, &mut self.base_val),
+                    1 => ONE_SLOT,
+                    _ => NO_SLOT,
+                };
             }
-            self.lin[i] = 0.25 * acc;
+            for &j in &self.col[row0..] {
+                self.pos[j as usize] = NO_SLOT;
+            }
         }
         self.start.push(self.col.len());
+        self.base_start.push(self.base_terms.len());
+        self.reweight(h, extra, fix);
+    }
+
+    /// Changes the linear term to `h` and the extra weights to those of `extra` (the same
+    /// pairs, in the same order, as at the last [`Mixing::load`], on the same node `fix`)
+    /// without rebuilding the rows: O(nonzeros + extra entries).
+    pub(crate) fn reweight(&mut self, h: &[f64], extra: &[(usize, usize, f64)], fix: &[i8]) {
+        let n = h.len();
+        debug_assert_eq!(2 * extra.len(), self.ext.slot.len());
+        self.val.clear();
+        self.val.extend_from_slice(&self.base_val);
+        for i in 0..n {
+            let terms = &self.base_terms[self.base_start[i]..self.base_start[i + 1]];
+            self.lin[i] = if fix[i] == FREE {
+                terms.iter().fold(h[i], |acc, t| acc + t)
+            } else {
+                0.0
+            };
+        }
+        for (e, &(a, b, w)) in extra.iter().enumerate() {
+            for (row, code) in [(a, self.ext.slot[2 * e]), (b, self.ext.slot[2 * e + 1])] {
+                match code {
+                    NO_SLOT => {}
+                    ONE_SLOT => self.lin[row] += 2.0 * w,
+                    p => {
+                        self.val[p as usize] += 0.25 * w;
+                        self.lin[row] += w;
+                    }
+                }
+            }
+        }
+        for l in &mut self.lin {
+            *l *= 0.25;
+        }
     }
 
     /// Sweeps on the loaded SDP (see [`Mixing::solve`]).

@@ -23,6 +23,36 @@ use super::boxqp::BoxQp;
 use super::sdp::{Mixing, Stop};
 use super::{shift, Clock, Model, FREE};
 use std::collections::HashMap;
+use std::hash::{BuildHasherDefault, Hasher};
+
+/// Multiply-rotate hashing of the few integers of a [`Cut`] (the FxHash recipe): the
+/// active-cut index is rebuilt and probed thousands of times per root ascent, where
+/// SipHash's collision resistance buys nothing.
+#[derive(Default)]
+pub(crate) struct CutHasher(u64);
+
+impl Hasher for CutHasher {
+    fn finish(&self) -> u64 {
+        self.0
+    }
+    fn write(&mut self, bytes: &[u8]) {
+        for &b in bytes {
+            self.write_u64(u64::from(b));
+        }
+    }
+    fn write_u8(&mut self, v: u8) {
+        self.write_u64(u64::from(v));
+    }
+    fn write_u32(&mut self, v: u32) {
+        self.write_u64(u64::from(v));
+    }
+    fn write_u64(&mut self, v: u64) {
+        self.0 = (self.0.rotate_left(5) ^ v).wrapping_mul(0x517c_c1b7_2722_0a95);
+    }
+}
+
+/// Position of each active cut in the cut list.
+type CutIndex = HashMap<Cut, usize, BuildHasherDefault<CutHasher>>;
 
 /// A triangle or pair inequality `g(b) ≤ 0`; `kind` 0–3 on the triple `i < j < k`, 4–7 on
 /// the pair `i < j` (`k` unused).
@@ -149,15 +179,19 @@ pub(crate) fn lagrangian_model(base: &Model, cuts: &[(Cut, f64)]) -> Model {
     m
 }
 
-/// Loads the SDP of `f_γ` at the node `fix` into `mix` from `base`'s sparse rows and the
-/// cuts' terms, without building `f_γ`'s dense matrix (the mixing sweeps read only rows).
-fn load_lagrangian(mix: &mut Mixing, base: &Model, cuts: &[(Cut, f64)], fix: &[i8]) {
-    let mut h = base.h.clone();
-    let mut extra = Vec::with_capacity(3 * cuts.len());
+/// The linear term `h` of `f_γ` and its extra pair entries `(a, b, γ_t c / 2)`, one for
+/// every pair term of every cut, zero multipliers included (the same entries in the same
+/// order for the same cuts, whatever their multipliers: see [`Mixing::reweight`]).
+fn lagrangian_terms(
+    base: &Model,
+    cuts: &[(Cut, f64)],
+    h: &mut Vec<f64>,
+    extra: &mut Vec<(usize, usize, f64)>,
+) {
+    h.clear();
+    h.extend_from_slice(&base.h);
+    extra.clear();
     for &(cut, gamma) in cuts {
-        if gamma <= 0.0 {
-            continue;
-        }
         let (lin, pair, _) = cut.terms();
         for (v, c) in lin {
             h[v] += gamma * c;
@@ -168,6 +202,13 @@ fn load_lagrangian(mix: &mut Mixing, base: &Model, cuts: &[(Cut, f64)], fix: &[i
             }
         }
     }
+}
+
+/// Loads the SDP of `f_γ` at the node `fix` into `mix` from `base`'s sparse rows and the
+/// cuts' terms, without building `f_γ`'s dense matrix (the mixing sweeps read only rows).
+fn load_lagrangian(mix: &mut Mixing, base: &Model, cuts: &[(Cut, f64)], fix: &[i8]) {
+    let (mut h, mut extra) = (Vec::new(), Vec::new());
+    lagrangian_terms(base, cuts, &mut h, &mut extra);
     mix.load(&h, &base.adj, &extra, fix);
 }
 
@@ -205,7 +246,9 @@ fn primal(n: usize, mix: &Mixing, fix: &[i8], x: &mut [f64], p: &mut [f64]) {
 
 /// Multiplier steps at a node `fix`, from the inherited cuts: `steps` rounds of mixing
 /// sweeps on the node's Lagrangian SDP (warm) and a projected subgradient step of Polyak
-/// length `gap/(2‖g‖²)`. Returns the new cuts (the caller validates the bound with them).
+/// length `gap/(2‖g‖²)`. Returns the new cuts, zero multipliers included, and leaves `mix`
+/// loaded with the SDP of their Lagrangian (ready for more sweeps; the caller validates
+/// the bound with them). The rows are built once: each step only re-weights them.
 #[allow(clippy::too_many_arguments)]
 pub(crate) fn refine(
     base: &Model,
@@ -220,8 +263,10 @@ pub(crate) fn refine(
     let mut cuts = cuts.to_vec();
     let (mut x, mut p) = (vec![0.0; n], vec![0.0; n * n]);
     let mut s = vec![0.0; n];
+    let (mut h, mut extra) = (Vec::new(), Vec::new());
+    lagrangian_terms(base, &cuts, &mut h, &mut extra);
+    mix.load(&h, &base.adj, &extra, fix);
     for _ in 0..steps {
-        load_lagrangian(mix, base, &cuts, fix);
         mix.run(
             fix,
             Stop {
@@ -233,7 +278,9 @@ pub(crate) fn refine(
         );
         // Only the pairs of the cuts are read: fill those, not all n² of them.
         primal_of_cuts(n, mix, fix, &cuts, &mut x, &mut p);
-        subgradient_step(&mut cuts, &x, &p, n, 0.5 * gap);
+        subgradient_step(&mut cuts, &x, &p, n, 0.5 * gap, false);
+        lagrangian_terms(base, &cuts, &mut h, &mut extra);
+        mix.reweight(&h, &extra, fix);
     }
     cuts
 }
@@ -276,8 +323,15 @@ fn primal_of_cuts(
 }
 
 /// `γ ← max(0, γ + step·g)` with Polyak's step `target/‖g‖²` (projected components left
-/// out); drops the cuts whose multiplier is zero.
-fn subgradient_step(cuts: &mut Vec<(Cut, f64)>, x: &[f64], p: &[f64], n: usize, target: f64) {
+/// out); with `drop`, removes the cuts whose multiplier is zero.
+fn subgradient_step(
+    cuts: &mut Vec<(Cut, f64)>,
+    x: &[f64],
+    p: &[f64],
+    n: usize,
+    target: f64,
+    drop: bool,
+) {
     let g: Vec<f64> = cuts.iter().map(|(c, _)| c.value(x, p, n)).collect();
     let norm2: f64 = cuts
         .iter()
@@ -291,74 +345,105 @@ fn subgradient_step(cuts: &mut Vec<(Cut, f64)>, x: &[f64], p: &[f64], n: usize, 
             *gam = (*gam + step * gt).max(0.0);
         }
     }
-    cuts.retain(|(_, gam)| *gam > 0.0);
+    if drop {
+        cuts.retain(|(_, gam)| *gam > 0.0);
+    }
 }
 
 fn key(c: &Cut) -> (u32, u32, u32, u8) {
     (c.i, c.j, c.k, c.kind)
 }
 
-/// The cuts with smallest index `i` violated by more than `t` at `(x̂, p̂)`.
+/// `max(a, b)` without NaN handling (the values are finite): one vector instruction.
 #[inline(always)]
-fn scan_row(n: usize, x: &[f64], p: &[f64], i: usize, t: f64) -> Vec<(f64, Cut)> {
-    let mut found: Vec<(f64, Cut)> = Vec::new();
-    let mut worst = vec![0.0; n];
-    let mut push = |cut: Cut, g: f64| {
-        if g > t {
-            found.push((g, cut));
-        }
-    };
+fn fmax(a: f64, b: f64) -> f64 {
+    if a > b {
+        a
+    } else {
+        b
+    }
+}
+
+/// Appends the cuts of `g` (their violations) above `t` to `found`, without a branch per cut.
+#[inline(always)]
+fn push_violated(found: &mut Vec<(f64, Cut)>, t: f64, g: [f64; 4], cuts: [Cut; 4]) {
+    let mut buf = [(0.0, cuts[0]); 4];
+    let mut cnt = 0;
+    for d in 0..4 {
+        buf[cnt] = (g[d], cuts[d]);
+        cnt += usize::from(g[d] > t);
+    }
+    found.extend_from_slice(&buf[..cnt]);
+}
+
+/// Appends to `found` the cuts with smallest index `i` violated by more than `t` at
+/// `(x̂, p̂)`, in index order (`worst` is scratch).
+#[inline(always)]
+fn scan_row(
+    n: usize,
+    x: &[f64],
+    p: &[f64],
+    i: usize,
+    t: f64,
+    found: &mut Vec<(f64, Cut)>,
+    worst: &mut Vec<f64>,
+) {
+    worst.resize(n, 0.0);
+    let xi = x[i];
     for j in (i + 1)..n {
         let pij = p[i * n + j];
-        let (xi, xj) = (x[i], x[j]);
+        let xj = x[j];
         let pair = |kind| Cut {
             kind,
             i: i as u32,
             j: j as u32,
             k: 0,
         };
-        push(pair(4), -pij);
-        push(pair(5), pij - xi);
-        push(pair(6), pij - xj);
-        push(pair(7), xi + xj - pij - 1.0);
+        push_violated(
+            found,
+            t,
+            [-pij, pij - xi, pij - xj, xi + xj - pij - 1.0],
+            [pair(4), pair(5), pair(6), pair(7)],
+        );
         // Largest of the four triangle violations for every k > j in one pass over
         // rows i and j (no branches: vectorisable); most triples violate nothing.
-        let (pi, pj) = (
+        let (pi, pj, xs) = (
             &p[i * n + j + 1..(i + 1) * n],
             &p[j * n + j + 1..(j + 1) * n],
+            &x[j + 1..],
         );
-        let worst = &mut worst[..n - j - 1];
-        for (((w, &pik), &pjk), &xk) in worst.iter_mut().zip(pi).zip(pj).zip(&x[j + 1..]) {
-            let g0 = xi + xj + xk - pij - pik - pjk - 1.0;
-            let g1 = pij + pik - pjk - xi;
-            let g2 = pij + pjk - pik - xj;
-            let g3 = pik + pjk - pij - xk;
-            *w = g0.max(g1).max(g2.max(g3));
-        }
-        for (d, &wk) in worst.iter().enumerate() {
-            if wk <= t {
-                continue;
-            }
-            let k = j + 1 + d;
-            let (pik, pjk, xk) = (pi[d], pj[d], x[k]);
-            let g = [
+        let w = &mut worst[..n - j - 1];
+        let tri = |pik: f64, pjk: f64, xk: f64| {
+            [
                 xi + xj + xk - pij - pik - pjk - 1.0,
                 pij + pik - pjk - xi,
                 pij + pjk - pik - xj,
                 pik + pjk - pij - xk,
-            ];
-            for (kind, gk) in g.into_iter().enumerate() {
-                let cut = Cut {
-                    kind: kind as u8,
-                    i: i as u32,
-                    j: j as u32,
-                    k: k as u32,
-                };
-                push(cut, gk);
+            ]
+        };
+        for (((wk, &pik), &pjk), &xk) in w.iter_mut().zip(pi).zip(pj).zip(xs) {
+            let g = tri(pik, pjk, xk);
+            *wk = fmax(fmax(g[0], g[1]), fmax(g[2], g[3]));
+        }
+        for (d, &wk) in w.iter().enumerate() {
+            if wk <= t {
+                continue;
             }
+            let k = (j + 1 + d) as u32;
+            let cut = |kind| Cut {
+                kind,
+                i: i as u32,
+                j: j as u32,
+                k,
+            };
+            push_violated(
+                found,
+                t,
+                tri(pi[d], pj[d], xs[d]),
+                [cut(0), cut(1), cut(2), cut(3)],
+            );
         }
     }
-    found
 }
 
 /// Most violated cuts at `(x̂, p̂)` not already in `active`, at most `max_new`, violation
@@ -372,7 +457,7 @@ fn separate(
     n: usize,
     x: &[f64],
     p: &[f64],
-    active: &HashMap<Cut, usize>,
+    active: &CutIndex,
     max_new: usize,
     tol: &mut f64,
     pool: &mut Vec<Cut>,
@@ -381,12 +466,22 @@ fn separate(
     let t = *tol;
     // Rows `i` scanned in order (on the rayon pool when `parallel`, gathered in order):
     // the same cuts either way.
-    let scan = |i: usize| super::with_avx2(|| scan_row(n, x, p, i, t));
     let found: Vec<(f64, Cut)> = if parallel {
         use rayon::prelude::*;
+        let scan = |i: usize| {
+            let (mut found, mut worst) = (Vec::new(), Vec::new());
+            super::with_avx2(|| scan_row(n, x, p, i, t, &mut found, &mut worst));
+            found
+        };
         (0..n).into_par_iter().flat_map_iter(scan).collect()
     } else {
-        (0..n).flat_map(scan).collect()
+        let (mut found, mut worst) = (Vec::new(), Vec::new());
+        super::with_avx2(|| {
+            for i in 0..n {
+                scan_row(n, x, p, i, t, &mut found, &mut worst);
+            }
+        });
+        found
     };
     // The pool: the most violated few times `room`, re-checked between scans.
     let room = max_new + active.len();
@@ -396,8 +491,11 @@ fn separate(
         found.select_nth_unstable_by(POOL_ROOMS * room, |a, b| b.0.total_cmp(&a.0));
         found.truncate(POOL_ROOMS * room);
     }
+    // The pool grouped by kind (stable): its re-checks then branch predictably.
     pool.clear();
-    pool.extend(found.iter().map(|(_, c)| *c));
+    for kind in 0..8 {
+        pool.extend(found.iter().map(|(_, c)| *c).filter(|c| c.kind == kind));
+    }
     select(found, total, active, max_new, tol)
 }
 
@@ -408,7 +506,7 @@ fn separate_pool(
     x: &[f64],
     p: &[f64],
     n: usize,
-    active: &HashMap<Cut, usize>,
+    active: &CutIndex,
     max_new: usize,
     tol: f64,
     pool: &[Cut],
@@ -438,7 +536,7 @@ fn separate_pool(
 fn select(
     mut found: Vec<(f64, Cut)>,
     total: usize,
-    active: &HashMap<Cut, usize>,
+    active: &CutIndex,
     max_new: usize,
     tol: &mut f64,
 ) -> Vec<Cut> {
@@ -536,7 +634,7 @@ pub(crate) fn strengthen(
     }
     let mut solver = BoxQp::new(n);
     let mut cuts: Vec<(Cut, f64)> = Vec::new();
-    let mut index: HashMap<Cut, usize> = HashMap::new();
+    let mut index = CutIndex::default();
     let mut best: Option<(Vec<(Cut, f64)>, f64)> = None;
     let mut best_bound = start;
     let mut theta = 1.0;
@@ -594,7 +692,7 @@ pub(crate) fn strengthen(
             index.insert(c, cuts.len());
             cuts.push((c, 0.0));
         }
-        subgradient_step(&mut cuts, &x, &p, n, theta * (upper - best_bound));
+        subgradient_step(&mut cuts, &x, &p, n, theta * (upper - best_bound), true);
         index.clear();
         for (t, (c, _)) in cuts.iter().enumerate() {
             index.insert(*c, t);
@@ -637,6 +735,23 @@ mod kernel_tests {
             .collect()
     }
 
+    /// A Beasley-like model of `n` variables (density 0.3, seed 4), random multipliers on
+    /// every cut (generator `seed`, returned for more draws), and a node fixing `fixed`.
+    fn case(
+        n: usize,
+        seed: u64,
+        fixed: &[(usize, i8)],
+    ) -> (Model, Vec<(Cut, f64)>, Vec<i8>, ChaCha8Rng) {
+        let base = model_of(&beasley(n, 0.3, 4));
+        let mut rng = ChaCha8Rng::seed_from_u64(seed);
+        let cuts = random_cuts(n, &mut rng);
+        let mut node = vec![FREE; n];
+        for &(i, f) in fixed {
+            node[i] = f;
+        }
+        (base, cuts, node, rng)
+    }
+
     #[test]
     fn cut_value_matches_its_terms() {
         // The written-out `value` against the generic terms, at random fractional points.
@@ -673,14 +788,8 @@ mod kernel_tests {
         // same factor, at the root and at a node with variables fixed to 0 and 1: the same
         // shift up to rounding. n = 30 (rank 9, stride 12: the padding stays zero).
         let n = 30;
-        let base = model_of(&beasley(n, 0.3, 4));
-        let mut rng = ChaCha8Rng::seed_from_u64(2);
-        let cuts = random_cuts(n, &mut rng);
+        let (base, cuts, node, _) = case(n, 2, &[(3, 1), (7, 0), (11, 1), (20, 0), (21, 1)]);
         let lm = lagrangian_model(&base, &cuts);
-        let mut node = vec![FREE; n];
-        for (i, f) in [(3, 1), (7, 0), (11, 1), (20, 0), (21, 1)] {
-            node[i] = f;
-        }
         let clock = Clock::new(None);
         for fix in [vec![FREE; n], node] {
             let (mut dense, mut sparse) = (Mixing::new(n), Mixing::new(n));
@@ -714,6 +823,42 @@ mod kernel_tests {
     }
 
     #[test]
+    fn reweighted_rows_match_a_fresh_load() {
+        // Rows loaded for other multipliers (a third of them zero) and re-weighted in
+        // place to `γ` against rows loaded for `γ` directly, at the root and at a node with
+        // variables fixed to 0 and 1: the same sweeps bit for bit (a re-weight that kept
+        // the old weights, or dropped the entries of variables fixed to one, differs).
+        let n = 30;
+        let (base, cuts, node, mut rng) = case(n, 5, &[(2, 1), (8, 0), (13, 1), (19, 1), (25, 0)]);
+        let other: Vec<(Cut, f64)> = random_cuts(n, &mut rng)
+            .into_iter()
+            .zip(&cuts)
+            .map(|((_, g), (c, _))| (*c, g))
+            .collect();
+        let clock = Clock::new(None);
+        for fix in [vec![FREE; n], node] {
+            let (mut fresh, mut moved) = (Mixing::new(n), Mixing::new(n));
+            let (mut h, mut extra) = (Vec::new(), Vec::new());
+            lagrangian_terms(&base, &other, &mut h, &mut extra);
+            moved.load(&h, &base.adj, &extra, &fix);
+            lagrangian_terms(&base, &cuts, &mut h, &mut extra);
+            moved.reweight(&h, &extra, &fix);
+            load_lagrangian(&mut fresh, &base, &cuts, &fix);
+            let (mut s1, mut s2) = (vec![0.0; n], vec![0.0; n]);
+            for (mix, s) in [(&mut fresh, &mut s1), (&mut moved, &mut s2)] {
+                let stop = Stop {
+                    max_sweeps: 20,
+                    tol: 0.0,
+                    clock: &clock,
+                };
+                mix.run(&fix, stop, s);
+            }
+            assert_eq!(s1, s2);
+            assert!(s1.iter().any(|&v| v > 0.0));
+        }
+    }
+
+    #[test]
     fn parallel_separation_finds_the_serial_cuts() {
         // The scan of all triples on the rayon pool against the serial scan, at the SDP
         // primal of a Beasley n = 70 instance: the same cuts in the same order, and the
@@ -729,8 +874,17 @@ mod kernel_tests {
         let mut out = Vec::new();
         for parallel in [false, true] {
             let (mut tol, mut pool) = (SEPARATION_TOL, Vec::new());
-            let cuts = separate(n, &x, &p, &HashMap::new(), n, &mut tol, &mut pool, parallel);
-            let again = separate_pool(&x, &p, n, &HashMap::new(), n, tol, &pool, parallel);
+            let cuts = separate(
+                n,
+                &x,
+                &p,
+                &CutIndex::default(),
+                n,
+                &mut tol,
+                &mut pool,
+                parallel,
+            );
+            let again = separate_pool(&x, &p, n, &CutIndex::default(), n, tol, &pool, parallel);
             out.push((cuts, pool, again));
         }
         assert!(!out[0].0.is_empty());
