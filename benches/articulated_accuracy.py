@@ -28,7 +28,9 @@ again with the DCT basis grown to the motion (refine_k_max, size by BIC); "robus
 8) also gets the pixels of the joint's own children (with their given lengths, × 1.05
 under Fig 4.3(c)) and rejects starts that leave a child's ray out of its reach
 (child_slack). Unseen8 (session 8, measured once at the end): every clip sampled at 40 Hz
-from frames 10 and 100 (cuts no part used).
+from frames 10 and 100 (cuts no part used). "robust-avg" (session 9, off by default)
+returns the distinct starts' average weighted by exp(−2 score) (average_starts). Final9 (session 9, defined before the change, measured once at the end):
+every clip at 30 Hz (every fourth frame, 2 s windows) from frames 5 and 45.
 Run: python benches/articulated_accuracy.py [--quick | --full] [--parts dev,fresh,...]
 """
 
@@ -166,17 +168,21 @@ METHOD_OPTIONS: dict[str, dict] = {
     },
     "robust-smooth": {"method": "robust", "motion_weight": 0.0, "refine_k_max": 0},
     "robust-k8": {"method": "robust", "refine_k_max": 0},
-    "robust-s7": {"method": "robust"},
+    "robust-s7": {"method": "robust", "average_starts": False},
     "robust": {"method": "robust"},
+    "robust-avg": {"method": "robust", "average_starts": True},
 }
 # Methods given the joint's pixels only; the others also get its children's pixels.
 WITHOUT_CHILDREN = ("thesis", "robust-mincost", "robust-smooth", "robust-k8", "robust-s7")
-FULL_ONLY = ("robust-mincost", "robust-smooth", "robust-k8")
-PARTS = ("dev", "held-out", "new", "fresh", "unseen", "unseen8")
+FULL_ONLY = ("robust-mincost", "robust-smooth", "robust-k8", "robust-s7")
+PARTS = ("dev", "held-out", "new", "fresh", "unseen", "unseen8", "final9")
 # Session 8's never-seen cuts: every clip sampled at 40 Hz (every third frame) from
 # frames 10 and 100, 60 frames each (the other parts sample every second frame).
 UNSEEN8_STEP, UNSEEN8_OFFSETS = 3, (10, 100)
 FRESH_C3D_OFFSETS = (300, 390, 480, 570, 660)
+# Session 9's never-seen cuts (defined before the method was changed, run once at the end):
+# every clip at 30 Hz (every fourth frame; 60 frames = 2 s) from frames 5 and 45.
+FINAL9_STEP, FINAL9_OFFSETS = 4, (5, 45)
 
 
 def main() -> None:
@@ -184,12 +190,17 @@ def main() -> None:
     ap.add_argument("--quick", action="store_true", help="one seed")
     ap.add_argument("--full", action="store_true", help="also the Fig 4.2(c) and 4.3 sweeps")
     ap.add_argument("--parts", default=",".join(PARTS), help="window sets to run")
+    ap.add_argument("--methods", default="", help="methods to run (default: all of the mode)")
     args = ap.parse_args()
     seeds = [0] if args.quick else [0, 1, 2]
     parts = [p for p in args.parts.split(",") if p]
     if not set(parts) <= set(PARTS):
         raise SystemExit(f"--parts: choose among {', '.join(PARTS)}")
     methods = [m for m in METHOD_OPTIONS if args.full or m not in FULL_ONLY]
+    if args.methods:
+        methods = [m for m in args.methods.split(",") if m]
+        if not set(methods) <= set(METHOD_OPTIONS):
+            raise SystemExit(f"--methods: choose among {', '.join(METHOD_OPTIONS)}")
     clips = {
         "131_01": bvh_clip("cmu_131_01_walk300.bvh"),
         "131_02": bvh_clip("cmu_131_02_walk300.bvh"),
@@ -229,6 +240,12 @@ def main() -> None:
         for name, (P, pairs) in clips.items()
         for off in UNSEEN8_OFFSETS
         if P[off::UNSEEN8_STEP].shape[0] >= 60
+    ]
+    wins += [
+        ("final9", window(name, P, pairs, FINAL9_STEP, off))
+        for name, (P, pairs) in clips.items()
+        for off in FINAL9_OFFSETS
+        if P[off::FINAL9_STEP].shape[0] >= 60
     ]
     wins = [(part, w) for part, w in wins if part in parts]
     good = [(part, w, j, p) for part, w in wins for j, p in w.pairs if w.eta[j] > 1.25]

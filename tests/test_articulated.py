@@ -374,6 +374,7 @@ def test_articulated_options_validation(scene: Scene) -> None:
         {"child_slack": -0.1},
         {"smooth_weight": float("inf")},
         {"refine": 1},
+        {"average_starts": "yes"},
         {"max_iter": 0},
     ):
         name = next(iter(bad))
@@ -412,6 +413,21 @@ def _marker_window() -> tuple[np.ndarray, list[tuple[int, int]], sc.Cameras, np.
     return P, pairs, cams, px
 
 
+def _fig43c_draw(
+    P: np.ndarray, px: np.ndarray, j: int, p: int, seed: int
+) -> tuple[np.ndarray, np.ndarray, float, np.ndarray]:
+    """Joint ``j``'s pixels and its parent ``p`` under Fig 4.3(c) conditions (1 px noise,
+    5 % missing, 5 % root error; the draw of the bench): ``(x, parent, length, den)`` with
+    ``den`` the norm of the true bone vectors."""
+    F = P.shape[0]
+    rng = np.random.default_rng(seed * 1000 + 17 * j)
+    r = float(np.linalg.norm(P[:, j] - P[:, p], axis=1).mean())
+    x = px[:, j] + rng.normal(0, 1.0, (F, 2))
+    x[rng.random(F) < 0.05] = np.nan
+    parent = P[:, p] + _smooth_offset(F, 0.05 * r, rng)
+    return x, parent, r, np.linalg.norm(P[:, j] - P[:, p])
+
+
 def test_robust_start_selection_on_markers() -> None:
     # Fig 4.3(c) conditions on another clip (optical markers), the joints with η_a > 1.25,
     # pooled over two noise draws. The pixels cannot tell the truth's basin from the
@@ -425,17 +441,11 @@ def test_robust_start_selection_on_markers() -> None:
     # = 0.43, 0.61); keeping the lowest cost 0.300 0.303 0.346 0.220; the thesis method
     # 0.285–0.328.
     P, pairs, cams, px = _marker_window()
-    F = P.shape[0]
     errs: dict[str, list[float]] = {"robust": [], "smooth-only": []}
     for seed, (j, p) in itertools.product((0, 1), pairs):
         if sc.articulated_reconstructability(P[:, j], cams, P[:, p], 8) <= 1.25:
             continue
-        rng = np.random.default_rng(seed * 1000 + 17 * j)
-        r = float(np.linalg.norm(P[:, j] - P[:, p], axis=1).mean())
-        x = px[:, j] + rng.normal(0, 1.0, (F, 2))
-        x[rng.random(F) < 0.05] = np.nan
-        parent = P[:, p] + _smooth_offset(F, 0.05 * r, rng)
-        den = np.linalg.norm(P[:, j] - P[:, p])
+        x, parent, r, den = _fig43c_draw(P, px, j, p, seed)
         for name, kw in (("robust", {}), ("smooth-only", {"motion_weight": 0.0})):
             out = sc.reconstruct_articulated(x, cams, parent, 1.05 * r, k=8, **kw)
             errs[name].append(float(np.linalg.norm(out.points - P[:, j]) / den))
@@ -512,6 +522,34 @@ def test_skeleton_gives_each_joint_its_children() -> None:
             errs[on].append(float(np.linalg.norm(rec.points[:, j] - P[:, j]) / den))
     assert max(errs[True]) < 0.8, errs
     assert min(errs[False]) > 1.2, errs
+
+
+# ------------------------- robust method, the starts' average (issue 12, session 9)
+def test_the_starts_average_beats_the_best_start() -> None:
+    # CMU 131_02 frames 910, 912, …, 1028 (walking to a stop) under Fig 4.3(c) conditions,
+    # the 7 joints with η_a > 1.25. Near grazing rays the refined starts form a family
+    # along the rays that the pixels, Eq 4.12 and the least motion score alike, and the
+    # best score is as often the farther member as the nearer; averaging the distinct starts
+    # by exp(−2 score) lowers the expected error. Measured per seed (0–3), average / best
+    # start: mean 0.123 / 0.141, 0.165 / 0.189, 0.090 / 0.099, 0.091 / 0.097 (ratio
+    # 0.87–0.94); pooled seeds 0–1: 0.144 / 0.165.
+    m = load_bvh(DATA / "mocap" / "cmu_131_02_stop300.bvh")
+    skeleton, keep = sc.Skeleton.from_bvh(m)
+    P = m.positions[60::2][:60][:, keep]
+    cams, px = _orbit(P, P.mean(axis=1))
+    errs: dict[bool, list[float]] = {True: [], False: []}
+    for seed, j in itertools.product((0, 1), range(len(skeleton.names))):
+        p = skeleton.parents[j]
+        if p == -1 or sc.articulated_reconstructability(P[:, j], cams, P[:, p], 8) <= 1.25:
+            continue
+        x, parent, r, den = _fig43c_draw(P, px, j, p, seed)
+        for on in (True, False):
+            out = sc.reconstruct_articulated(x, cams, parent, 1.05 * r, k=8, average_starts=on)
+            errs[on].append(float(np.linalg.norm(out.points - P[:, j]) / den))
+    avg, best = np.array(errs[True]), np.array(errs[False])
+    assert len(avg) == 14, len(avg)
+    assert avg.mean() < 0.16, errs
+    assert avg.mean() < 0.95 * best.mean(), errs
 
 
 def test_bad_children_are_refused_by_name() -> None:

@@ -200,6 +200,8 @@ struct PyArticulatedOptions {
     #[pyo3(attribute)]
     child_slack: f64,
     #[pyo3(attribute)]
+    average_starts: bool,
+    #[pyo3(attribute)]
     max_iter: usize,
     #[pyo3(attribute)]
     time_limit: Option<f64>,
@@ -231,6 +233,7 @@ fn art_options(o: &PyArticulatedOptions) -> PyResult<ArticulatedOptions> {
         motion_weight: o.motion_weight,
         refine_k_max: o.refine_k_max,
         child_slack: o.child_slack,
+        average_starts: o.average_starts,
         lm: socialcore::geometry::LmOptions {
             max_iterations: o.max_iter,
             ..defaults.lm

@@ -406,6 +406,7 @@ fn final_refinement_grows_the_basis_to_the_motion() {
         let run = |refine_k_max: usize| {
             let o = ArticulatedOptions {
                 refine_k_max,
+                average_starts: false,
                 ..opts(3)
             };
             reconstruct_articulated(&s.cameras, &s.pixels, &s.parent, &s.times, s.length, &o)
@@ -472,5 +473,57 @@ fn children_out_of_reach_outweigh_a_better_fit() {
     assert_eq!(
         select_start(&[ev(100.0, 0.0), ev(101.0, 0.0)], 50, 8, w),
         Some(0)
+    );
+}
+
+#[test]
+fn starts_are_averaged_by_the_exponential_of_their_score() {
+    // σ(cost) ≈ 12.9 px² (50 observations, k = 8). Equal roughness; the second start moves
+    // 10× less (−2 in score, default weights) and costs one σ more (+1): it scores 1 lower
+    // and weighs e^λ (λ = AVERAGE_SHARPNESS) times as much as the first. The third never
+    // counts (NaN motion).
+    let ev = |cost: f64, motion: f64| StartEvidence {
+        cost,
+        roughness: 1e-3,
+        motion,
+        children: 0.0,
+    };
+    let sd = (2.0f64 * 83.0).sqrt() * 80.0 / 83.0;
+    let starts = [ev(80.0, 4.0), ev(80.0 + sd, 0.4), ev(70.0, f64::NAN)];
+    let w = Some((SMOOTH_WEIGHT, MOTION_WEIGHT));
+    // The cost floor is the NaN start's 70 px², so recompute σ from it.
+    let sc = start_scores(&starts, 50, 8, w).unwrap();
+    assert!(sc[2].is_infinite());
+    let weights = start_weights(&sc).unwrap();
+    let want = (AVERAGE_SHARPNESS * (sc[0] - sc[1])).exp();
+    assert!(
+        (weights[1] / weights[0] - want).abs() < 1e-12,
+        "{weights:?}"
+    );
+    assert!(sc[0] > sc[1], "{sc:?}");
+    assert!((weights.iter().sum::<f64>() - 1.0).abs() < 1e-12);
+    assert_eq!(weights[2], 0.0);
+    // Without the NaN start the score gap is 1: weights e^λ/(1+e^λ) and 1/(1+e^λ).
+    let sc = start_scores(&starts[..2], 50, 8, w).unwrap();
+    assert!((sc[0] - sc[1] - 1.0).abs() < 1e-5, "{sc:?}");
+    let weights = start_weights(&sc).unwrap();
+    let e = AVERAGE_SHARPNESS.exp();
+    assert!((weights[1] - e / (1.0 + e)).abs() < 1e-5, "{weights:?}");
+    // The best start of the average is the one `select_start` keeps.
+    assert_eq!(select_start(&starts[..2], 50, 8, w), Some(1));
+    // No weights (lowest cost kept): no scores, nothing to average.
+    assert!(start_scores(&starts, 50, 8, None).is_none());
+    assert!(start_weights(&[f64::INFINITY]).is_none());
+    // The same solution found twice counts once: starts within 1 cm (RMS) of a better one
+    // are dropped, farther ones kept, best score first.
+    let traj = |x: f64| vec![Vector3::new(x, 0.0, 0.0); 4];
+    let pts = [traj(0.0), traj(0.005), traj(0.3), traj(0.302)];
+    assert_eq!(
+        distinct_starts(&pts, &[1.0, 0.0, 2.0, 3.0], 0.01),
+        vec![1, 2]
+    );
+    assert_eq!(
+        distinct_starts(&pts, &[1.0, 0.0, 2.0, f64::INFINITY], 0.001),
+        vec![1, 0, 2]
     );
 }
