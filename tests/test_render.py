@@ -398,6 +398,10 @@ def test_texture_colours_follow_hsv_within_one_level_everywhere():
         [0, 255, 0],
         [0, 0, 255],
     ]
+    # whole runs of 32 pixels truncate, the last n mod 32 round (as OpenCV did on AVX2):
+    # 5·(1 − 51/255) = 4 lands just below 4 in float32
+    row = hsv_to_rgb_u8([[0, 51, 5]] * 33)
+    assert row[0].tolist() == [5, 3, 3] and row[-1].tolist() == [5, 4, 4]
     with pytest.raises(ValueError, match="hsv"):
         hsv_to_rgb_u8(np.zeros((4, 2)))
 

@@ -41,22 +41,26 @@ _SECTOR_RGB = np.array([[0, 3, 1], [2, 0, 1], [1, 0, 3], [1, 2, 0], [3, 1, 0], [
 def hsv_to_rgb_u8(hsv: npt.ArrayLike) -> U8Image:
     """8-bit HSV ``(..., 3)`` (hue in [0, 180), saturation and value in [0, 255], OpenCV's
     8-bit convention) → 8-bit RGB ``(..., 3)``, computed here in float32 so that rendered
-    scenes do not depend on the OpenCV version.
+    scenes depend neither on the OpenCV version nor on the CPU.
 
     The arithmetic is fixed, operation by operation: s = S·(1/255), v = V·(1/255),
     h = H·(6/180) split into sector ⌊h⌋ and fraction f, p = v·(1 − s),
-    q = v·fma(−s, f, 1), t = v·fma(−s, 1 − f, 1), each channel ×255 and truncated. This
-    reproduces OpenCV 4.9–5.0's ``COLOR_HSV2RGB`` bit for bit on all 180·256·256 inputs;
-    OpenCV 5.1 rounds differently, which changed every rendered test scene by one level
-    (``tests/test_render.py`` pins the table).
+    q = v·fma(−s, f, 1), t = v·fma(−s, 1 − f, 1), each channel ×255. The pixels, taken in
+    C order, are truncated to integers in whole runs of 32 and the last ``n mod 32`` are
+    rounded: this is what OpenCV 4.9–5.0's ``COLOR_HSV2RGB`` does on one row of ``n``
+    pixels on an x86-64 CPU with AVX2 (its vector loop truncates, its scalar tail rounds),
+    bit for bit on every input, so the scenes the tests were measured on are unchanged.
+    OpenCV 5.1 rounds differently, and other CPUs have other vector widths;
+    ``tests/test_render.py`` pins the table.
     """
     a = np.asarray(hsv)
     if a.shape[-1:] != (3,):
         raise ValueError(f"hsv: expected shape (..., 3), got {a.shape}")
+    flat = a.reshape(-1, 3)
     f32, f64 = np.float32, np.float64
-    s = a[..., 1].astype(f32) * f32(1 / 255)
-    v = a[..., 2].astype(f32) * f32(1 / 255)
-    h = a[..., 0].astype(f32) * f32(6 / 180)
+    s = flat[:, 1].astype(f32) * f32(1 / 255)
+    v = flat[:, 2].astype(f32) * f32(1 / 255)
+    h = flat[:, 0].astype(f32) * f32(6 / 180)
     whole = np.floor(h)
     frac = h - whole
     sector = whole.astype(np.int64) % 6
@@ -68,7 +72,10 @@ def hsv_to_rgb_u8(hsv: npt.ArrayLike) -> U8Image:
     one = f32(1)
     table = np.stack([v, v * (one - s), v * fused(s, frac), v * fused(s, one - frac)], axis=-1)
     rgb = np.take_along_axis(table, _SECTOR_RGB[sector], axis=-1) * f32(255)
-    return np.clip(np.trunc(rgb), 0, 255).astype(np.uint8)
+    runs = len(rgb) // 32 * 32
+    rgb[:runs] = np.trunc(rgb[:runs])
+    rgb[runs:] = np.rint(rgb[runs:])
+    return np.clip(rgb, 0, 255).astype(np.uint8).reshape(a.shape)
 
 
 def _colour_noise(rng: np.random.Generator, h: int, w: int) -> npt.NDArray[np.float32]:
