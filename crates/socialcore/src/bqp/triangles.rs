@@ -23,36 +23,11 @@ use super::boxqp::BoxQp;
 use super::sdp::{Mixing, Stop};
 use super::{shift, Clock, Model, FREE};
 use std::collections::HashMap;
-use std::hash::{BuildHasherDefault, Hasher};
 
-/// Multiply-rotate hashing of the few integers of a [`Cut`] (the FxHash recipe): the
-/// active-cut index is rebuilt and probed thousands of times per root ascent, where
-/// SipHash's collision resistance buys nothing.
-#[derive(Default)]
-pub(crate) struct CutHasher(u64);
-
-impl Hasher for CutHasher {
-    fn finish(&self) -> u64 {
-        self.0
-    }
-    fn write(&mut self, bytes: &[u8]) {
-        for &b in bytes {
-            self.write_u64(u64::from(b));
-        }
-    }
-    fn write_u8(&mut self, v: u8) {
-        self.write_u64(u64::from(v));
-    }
-    fn write_u32(&mut self, v: u32) {
-        self.write_u64(u64::from(v));
-    }
-    fn write_u64(&mut self, v: u64) {
-        self.0 = (self.0.rotate_left(5) ^ v).wrapping_mul(0x517c_c1b7_2722_0a95);
-    }
-}
-
-/// Position of each active cut in the cut list.
-type CutIndex = HashMap<Cut, usize, BuildHasherDefault<CutHasher>>;
+/// Position of each active cut in the cut list. Hashed by FxHash: the index is rebuilt and
+/// probed thousands of times per root ascent, where SipHash's collision resistance buys
+/// nothing (only lookups: its order is never read).
+type CutIndex = HashMap<Cut, usize, rustc_hash::FxBuildHasher>;
 
 /// A triangle or pair inequality `g(b) ≤ 0`; `kind` 0–3 on the triple `i < j < k`, 4–7 on
 /// the pair `i < j` (`k` unused).
