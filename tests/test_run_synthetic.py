@@ -2,6 +2,8 @@
 (no video): wearers calibrate (Eq 3.1 range of motion), then look at one common target.
 Measures what calibration buys for joint attention against the truth."""
 
+from dataclasses import replace
+
 import numpy as np
 import pytest
 from scipy.spatial.transform import Rotation
@@ -110,6 +112,44 @@ def test_calibration_stage_recovers_truth_and_improves_joint_attention(seed):
     _c, times2, _f, charges2 = gaze_and_charges(cams, names, calibration=None)
     err2, _ = _charge_errors(names, charges2, times2, target, t_look)
     assert np.median(err2) > 2 * np.median(err)
+
+
+def test_charge_stage_options_leave_the_gaze_frames_unchanged():
+    """``pipeline.CHARGE_STAGE_OPTIONS`` (the fields a cached replay of the charge stage may
+    change, ``benches/bench_run_truth.py --cache``) reach no stage before the charges; the
+    other options do."""
+    from socialcam.pipeline import CHARGE_STAGE_OPTIONS, _gaze_frames
+
+    names, cams, segments, _truth, _target, _t = _wearers(1)
+    base = RunOptions()
+    _c, times, frames = _gaze_frames(cams, names, segments, None, base)
+    changed = {
+        "seed": 7,
+        "member_sigma": 2.0,
+        "min_charge_depth": 1.0,
+        "min_members": 3,
+        "membership": "partition",
+        "charge_persistence": 0.0,
+        "pair_bridge": 0.0,
+        "charge_pooling": 0.0,
+    }
+    assert set(changed) == set(CHARGE_STAGE_OPTIONS)
+    for field, value in changed.items():
+        assert getattr(base, field) != value, field
+        opts = replace(base, **{field: value})
+        _c2, times2, frames2 = _gaze_frames(cams, names, segments, None, opts)
+        np.testing.assert_array_equal(times2, times)
+        for f, g in zip(frames, frames2, strict=True):
+            assert (f is None) == (g is None), field
+            if f is not None:
+                np.testing.assert_array_equal(f.v, g.v, err_msg=field)
+                np.testing.assert_array_equal(f.h, g.h, err_msg=field)
+    # the comparison can see a change: without the calibration the rays differ
+    _c3, _t3, uncalibrated = _gaze_frames(cams, names, None, None, base)
+    assert any(
+        f is not None and g is not None and not np.array_equal(f.v, g.v)
+        for f, g in zip(frames, uncalibrated, strict=True)
+    )
 
 
 def test_fallbacks_are_stated():

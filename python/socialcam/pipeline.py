@@ -1292,6 +1292,33 @@ def gaze_and_charges(
     output times, the gaze frames that take part in charges (see
     ``charges_in_calibration``) and the charges per frame."""
     opts = apply_overrides(options, RunOptions, overrides)
+    cals, out_times, frames = _gaze_frames(cameras, names, calibration, times, opts)
+    return cals, out_times, frames, _find_charges(frames, out_times, opts)
+
+
+#: :class:`RunOptions` fields read only by the charge stage (:func:`_find_charges`): the
+#: gaze frames before it do not depend on them.
+CHARGE_STAGE_OPTIONS = (
+    "seed",
+    "member_sigma",
+    "min_charge_depth",
+    "min_members",
+    "membership",
+    "charge_persistence",
+    "pair_bridge",
+    "charge_pooling",
+)
+
+
+def _gaze_frames(
+    cameras: Mapping[str, Cameras],
+    names: Sequence[str],
+    calibration: Mapping[str, tuple[float, float]] | None,
+    times: npt.ArrayLike | None,
+    opts: RunOptions,
+) -> tuple[dict[str, GazeCalibration], FloatArray, list[GazeRays | None]]:
+    """:func:`gaze_and_charges` up to the charge stage: calibrations, output times and the
+    gaze frames that take part in charges."""
     segments = _parse_segments(calibration, names)
     cals = {n: _calibrate_one(cameras.get(n), segments.get(n), opts)[0] for n in names}
     t = None if times is None else as_float_array(times, "times", (None,))
@@ -1302,7 +1329,7 @@ def gaze_and_charges(
         if f"{n}.p" in arrays
     }
     frames = _frames(names, _social(gaze, arrays["times"], segments, cals, opts))
-    return cals, arrays["times"], frames, _find_charges(frames, arrays["times"], opts)
+    return cals, arrays["times"], frames
 
 
 def _social(
