@@ -284,32 +284,15 @@ fn cholesky_generic(l: &mut [f64], r: usize, clock: Option<&Clock>) -> bool {
         let (done, rest) = l.split_at_mut(i * r);
         let row_i = &mut rest[..r];
         for j in 0..=i {
-            // Four partial sums: a dot product the compiler can vectorise.
-            let dot = |a: &[f64], b: &[f64]| {
-                let mut acc = [0.0f64; 4];
-                let (ca, cb) = (a.chunks_exact(4), b.chunks_exact(4));
-                let tail: f64 = ca
-                    .remainder()
-                    .iter()
-                    .zip(cb.remainder())
-                    .map(|(x, y)| x * y)
-                    .sum();
-                for (x, y) in ca.zip(cb) {
-                    for t in 0..4 {
-                        acc[t] += x[t] * y[t];
-                    }
-                }
-                (acc[0] + acc[1]) + (acc[2] + acc[3]) + tail
-            };
             if i == j {
-                let s = row_i[i] - dot(&row_i[..i], &row_i[..i]);
+                let s = row_i[i] - super::dot4(&row_i[..i], &row_i[..i]);
                 if s <= 0.0 || !s.is_finite() {
                     return false;
                 }
                 row_i[i] = s.sqrt();
             } else {
                 let row_j = &done[j * r..j * r + j + 1];
-                let s = row_i[j] - dot(&row_i[..j], &row_j[..j]);
+                let s = row_i[j] - super::dot4(&row_i[..j], &row_j[..j]);
                 row_i[j] = s / row_j[j];
             }
         }

@@ -190,11 +190,12 @@ fn load_lagrangian(mix: &mut Mixing, base: &Model, cuts: &[(Cut, f64)], fix: &[i
 /// The 0/1 reading of the mixing factor of the node `fix`: `x̂_i = (1 + y_i0)/2`,
 /// `p̂_ij = (1 + y_i0 + y_j0 + y_ij)/4` for free `i, j`; fixed variables at their values
 /// (`p̂_ij = x̂_i x̂_j` when one is fixed).
+#[inline(always)]
 fn primal(n: usize, mix: &Mixing, fix: &[i8], x: &mut [f64], p: &mut [f64]) {
     let k = mix.k;
     let v = &mix.v;
     let v0 = &v[n * k..(n + 1) * k];
-    let dot = |a: &[f64], b: &[f64]| a.iter().zip(b).map(|(u, w)| u * w).sum::<f64>();
+    let dot = super::dot4;
     let y0: Vec<f64> = (0..n).map(|i| dot(&v[i * k..(i + 1) * k], v0)).collect();
     for i in 0..n {
         x[i] = if fix[i] == FREE {
@@ -252,7 +253,7 @@ pub(crate) fn refine(
             &mut s,
         );
         // Only the pairs of the cuts are read: fill those, not all n² of them.
-        primal_of_cuts(n, mix, fix, &cuts, &mut x, &mut p);
+        super::with_avx2(|| primal_of_cuts(n, mix, fix, &cuts, &mut x, &mut p));
         subgradient_step(&mut cuts, &x, &p, n, 0.5 * gap, false);
         lagrangian_terms(base, &cuts, &mut h, &mut extra);
         mix.reweight(&h, &extra, fix);
@@ -261,6 +262,7 @@ pub(crate) fn refine(
 }
 
 /// [`primal`] restricted to `x̂` and the entries of `p̂` that the `cuts` read.
+#[inline(always)]
 fn primal_of_cuts(
     n: usize,
     mix: &Mixing,
@@ -272,7 +274,7 @@ fn primal_of_cuts(
     let k = mix.k;
     let v = &mix.v;
     let row = |i: usize| &v[i * k..(i + 1) * k];
-    let dot = |a: &[f64], b: &[f64]| a.iter().zip(b).map(|(u, w)| u * w).sum::<f64>();
+    let dot = super::dot4;
     let y0: Vec<f64> = (0..n).map(|i| dot(row(i), row(n))).collect();
     for i in 0..n {
         x[i] = if fix[i] == FREE {
@@ -554,10 +556,25 @@ fn valid_bound(
     (!clock.out()).then_some(r.bound)
 }
 
-/// Iterations of the multiplier ascent at the root, and how often the valid bound is
-/// evaluated (an eigenvalue decomposition and a box relaxation each) and new cuts are
-/// separated (an O(n³) scan). Many cheap steps (warm-started, few sweeps each) beat few
-/// accurate ones: on Beasley n = 100, seeds 0–9, 80 steps of 8 sweeps (separating every
+/// What [`strengthen`] returns: the cuts with their multipliers, the valid bound of their
+/// Lagrangian and the shift that proves it.
+pub(crate) type Strengthened = (Vec<(Cut, f64)>, f64, Vec<f64>);
+
+/// Root ascent iterations for `n` variables: `0.6 n` within [40, 150]. The ascent costs
+/// O(n²)–O(n³) a step while the tree it saves grows exponentially with `n`, so the best
+/// length grows with `n`. Measured (serial CPU, loaded machine; the bound is taken from
+/// the best evaluation): Beasley n = 100 seeds 0–49, 50 / 60 / 70 / 80 / 100 steps gave
+/// 3.08 / 3.04 / 3.16 / 3.35 / 3.78 s (2,413 nodes at 80, 2,916 at 60); n = 150 seeds 0–9,
+/// 60 / 80 / 100 / 120 / 150 steps 5.77 / 4.67 / 4.30 / 4.25 / 4.38 s. On seeds not used
+/// for the choice: n = 100 seeds 100–199, 80 → 60 steps 6.78 → 6.36 s; n = 150 seeds
+/// 10–19, 80 → 90 steps 4.76 → 4.95 s (within the noise of the loaded machine).
+fn root_iterations(n: usize) -> usize {
+    ((0.6 * n as f64).round() as usize).clamp(40, 150)
+}
+
+/// How often the root ascent evaluates the valid bound (an eigenvalue decomposition and a
+/// box relaxation each) and separates new cuts (an O(n³) scan). Many cheap steps
+/// (warm-started, few sweeps each) beat few accurate ones: on Beasley n = 100, seeds 0–9, 80 steps of 8 sweeps (separating every
 /// other step, evaluating every tenth) gave 1,191 nodes in 2.1 s CPU against 1,275 nodes in
 /// 4.9 s with 60 steps of 30 sweeps (separating and evaluating every fifth).
 ///
@@ -569,7 +586,6 @@ fn valid_bound(
 /// full scan every 4 steps gave 548 / 410 / 3,519 nodes (1.5 / 13.2 s CPU); every 16, 1,255
 /// nodes on n = 100 seeds 0–9 (the pool goes stale). (All with a pool of 4×, see
 /// [`POOL_ROOMS`].)
-const ITERS: usize = 80;
 const EVAL_EVERY: usize = 10;
 const FULL_SCAN_EVERY: usize = 8;
 /// Smallest violation for which a cut is separated.
@@ -593,8 +609,9 @@ pub(crate) const NODE_STEPS: usize = 4;
 /// `γ = 0` towards the incumbent value `upper`; `start` is the valid bound without cuts,
 /// `mix` the SDP factor of `base` (warm start; left at the last iterate's). With `parallel`
 /// the separation runs on the rayon pool (same cuts).
-/// Returns the best multipliers found and their valid bound, or `None` if no multipliers
-/// beat `start` (or the clock ran out first).
+/// Returns the best multipliers found, their valid bound and the shift that proves it (the
+/// mixing shift of that iterate repaired to positive definiteness), or `None` if no
+/// multipliers beat `start` (or the clock ran out first).
 pub(crate) fn strengthen(
     base: &Model,
     clock: &Clock,
@@ -602,7 +619,7 @@ pub(crate) fn strengthen(
     start: f64,
     mix: &mut Mixing,
     parallel: bool,
-) -> Option<(Vec<(Cut, f64)>, f64)> {
+) -> Option<Strengthened> {
     let n = base.n;
     if n < 3 || !start.is_finite() || upper <= start {
         return None;
@@ -610,7 +627,7 @@ pub(crate) fn strengthen(
     let mut solver = BoxQp::new(n);
     let mut cuts: Vec<(Cut, f64)> = Vec::new();
     let mut index = CutIndex::default();
-    let mut best: Option<(Vec<(Cut, f64)>, f64)> = None;
+    let mut best: Option<Strengthened> = None;
     let mut best_bound = start;
     let mut theta = 1.0;
     let mut stall = 0;
@@ -619,14 +636,15 @@ pub(crate) fn strengthen(
     let free = vec![FREE; n];
     let mut tol = SEPARATION_TOL;
     let mut pool = Vec::new();
-    for it in 0..ITERS {
+    let iters = root_iterations(n);
+    for it in 0..iters {
         if clock.out() {
             break;
         }
         load_lagrangian(mix, base, &cuts, &free);
         // The first solve may start from a random factor: converge it (the first
         // subgradient must come from the SDP optimum); later ones are warm.
-        let evaluate = it % EVAL_EVERY == EVAL_EVERY - 1 || it + 1 == ITERS;
+        let evaluate = it % EVAL_EVERY == EVAL_EVERY - 1 || it + 1 == iters;
         let sweeps = if it == 0 { FIRST_SWEEPS } else { SWEEPS };
         mix.run(
             &free,
@@ -644,7 +662,7 @@ pub(crate) fn strengthen(
             };
             if b > best_bound + 1e-9 * b.abs().max(1.0) {
                 best_bound = b;
-                best = Some((cuts.clone(), b));
+                best = Some((cuts.clone(), b, model.s));
                 stall = 0;
             } else {
                 stall += 1;
@@ -657,7 +675,7 @@ pub(crate) fn strengthen(
                 break;
             }
         }
-        primal(n, mix, &free, &mut x, &mut p);
+        super::with_avx2(|| primal(n, mix, &free, &mut x, &mut p));
         let sep = if it % FULL_SCAN_EVERY == 0 {
             separate(n, &x, &p, &index, n, &mut tol, &mut pool, parallel)
         } else {
