@@ -31,6 +31,10 @@ under Fig 4.3(c)) and rejects starts that leave a child's ray out of its reach
 from frames 10 and 100 (cuts no part used). "robust-avg" (session 9, off by default)
 returns the distinct starts' average weighted by exp(−2 score) (average_starts). Final9 (session 9, defined before the change, measured once at the end):
 every clip at 30 Hz (every fourth frame, 2 s windows) from frames 5 and 45.
+"robust-lw20" (session 11, off by default) also prefers, among starts that fit alike, the
+shorter refined bone (length_weight=20); "robust-avg-lw20" (--full) with average_starts.
+Final11 (session 11, defined before it was run): every clip at 24 Hz (every fifth frame,
+2.5 s windows) from frames 2 and 40.
 Run: python benches/articulated_accuracy.py [--quick | --full] [--parts dev,fresh,...]
 """
 
@@ -170,12 +174,14 @@ METHOD_OPTIONS: dict[str, dict] = {
     "robust-k8": {"method": "robust", "refine_k_max": 0},
     "robust-s7": {"method": "robust", "average_starts": False},
     "robust": {"method": "robust"},
+    "robust-lw20": {"method": "robust", "length_weight": 20.0},
     "robust-avg": {"method": "robust", "average_starts": True},
+    "robust-avg-lw20": {"method": "robust", "average_starts": True, "length_weight": 20.0},
 }
 # Methods given the joint's pixels only; the others also get its children's pixels.
 WITHOUT_CHILDREN = ("thesis", "robust-mincost", "robust-smooth", "robust-k8", "robust-s7")
-FULL_ONLY = ("robust-mincost", "robust-smooth", "robust-k8", "robust-s7")
-PARTS = ("dev", "held-out", "new", "fresh", "unseen", "unseen8", "final9")
+FULL_ONLY = ("robust-mincost", "robust-smooth", "robust-k8", "robust-s7", "robust-avg-lw20")
+PARTS = ("dev", "held-out", "new", "fresh", "unseen", "unseen8", "final9", "final11")
 # Session 8's never-seen cuts: every clip sampled at 40 Hz (every third frame) from
 # frames 10 and 100, 60 frames each (the other parts sample every second frame).
 UNSEEN8_STEP, UNSEEN8_OFFSETS = 3, (10, 100)
@@ -183,6 +189,9 @@ FRESH_C3D_OFFSETS = (300, 390, 480, 570, 660)
 # Session 9's never-seen cuts (defined before the method was changed, run once at the end):
 # every clip at 30 Hz (every fourth frame; 60 frames = 2 s) from frames 5 and 45.
 FINAL9_STEP, FINAL9_OFFSETS = 4, (5, 45)
+# Session 11's never-seen cuts (defined before they were run): every clip at 24 Hz (every
+# fifth frame; 60 frames = 2.5 s) from frames 2 and 40.
+FINAL11_STEP, FINAL11_OFFSETS = 5, (2, 40)
 
 
 def main() -> None:
@@ -246,6 +255,12 @@ def main() -> None:
         for name, (P, pairs) in clips.items()
         for off in FINAL9_OFFSETS
         if P[off::FINAL9_STEP].shape[0] >= 60
+    ]
+    wins += [
+        ("final11", window(name, P, pairs, FINAL11_STEP, off))
+        for name, (P, pairs) in clips.items()
+        for off in FINAL11_OFFSETS
+        if P[off::FINAL11_STEP].shape[0] >= 60
     ]
     wins = [(part, w) for part, w in wins if part in parts]
     good = [(part, w, j, p) for part, w in wins for j, p in w.pairs if w.eta[j] > 1.25]

@@ -200,6 +200,8 @@ struct PyArticulatedOptions {
     #[pyo3(attribute)]
     child_slack: f64,
     #[pyo3(attribute)]
+    length_weight: f64,
+    #[pyo3(attribute)]
     average_starts: bool,
     #[pyo3(attribute)]
     max_iter: usize,
@@ -233,6 +235,7 @@ fn art_options(o: &PyArticulatedOptions) -> PyResult<ArticulatedOptions> {
         motion_weight: o.motion_weight,
         refine_k_max: o.refine_k_max,
         child_slack: o.child_slack,
+        length_weight: o.length_weight,
         average_starts: o.average_starts,
         lm: socialcore::geometry::LmOptions {
             max_iterations: o.max_iter,

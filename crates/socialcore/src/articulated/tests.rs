@@ -346,10 +346,11 @@ fn start_selection_trades_cost_against_smoothness() {
                 roughness,
                 motion: 1.0,
                 children: 0.0,
+                radius: 1.0,
             })
             .collect();
         for motion in [0.0, 2.0] {
-            let w = weight.map(|w| (w, motion));
+            let w = weight.map(|w| (w, motion, 0.0));
             assert_eq!(select_start(&ev, 50, 8, w), want, "{what}");
         }
     }
@@ -364,8 +365,9 @@ fn start_selection_prefers_the_stiller_of_equal_starts() {
         roughness,
         motion,
         children: 0.0,
+        radius: 1.0,
     };
-    let w = Some((SMOOTH_WEIGHT, MOTION_WEIGHT));
+    let w = Some((SMOOTH_WEIGHT, MOTION_WEIGHT, 0.0));
     let base = ev(83.0, 1e-3, 4.0);
     // Same cost and roughness, the second moves 10× less: the stiller wins.
     assert_eq!(
@@ -385,7 +387,7 @@ fn start_selection_prefers_the_stiller_of_equal_starts() {
     assert_eq!(select_start(&[base, ev(83.0, 1.0, 0.4)], 50, 8, w), Some(0));
     // The motion term off: equal scores, the first (lowest) kept; NaN motion never wins.
     assert_eq!(
-        select_start(&[base, ev(83.0, 1e-3, 0.4)], 50, 8, Some((1.0, 0.0))),
+        select_start(&[base, ev(83.0, 1e-3, 0.4)], 50, 8, Some((1.0, 0.0, 0.0))),
         Some(0)
     );
     assert_eq!(
@@ -464,8 +466,9 @@ fn children_out_of_reach_outweigh_a_better_fit() {
         roughness: 1e-3,
         motion: 1.0,
         children,
+        radius: 1.0,
     };
-    let w = Some((SMOOTH_WEIGHT, MOTION_WEIGHT));
+    let w = Some((SMOOTH_WEIGHT, MOTION_WEIGHT, 0.0));
     assert_eq!(
         select_start(&[ev(100.0, 100.0), ev(101.0, 0.0)], 50, 8, w),
         Some(1)
@@ -487,10 +490,11 @@ fn starts_are_averaged_by_the_exponential_of_their_score() {
         roughness: 1e-3,
         motion,
         children: 0.0,
+        radius: 1.0,
     };
     let sd = (2.0f64 * 83.0).sqrt() * 80.0 / 83.0;
     let starts = [ev(80.0, 4.0), ev(80.0 + sd, 0.4), ev(70.0, f64::NAN)];
-    let w = Some((SMOOTH_WEIGHT, MOTION_WEIGHT));
+    let w = Some((SMOOTH_WEIGHT, MOTION_WEIGHT, 0.0));
     // The cost floor is the NaN start's 70 px², so recompute σ from it.
     let sc = start_scores(&starts, 50, 8, w).unwrap();
     assert!(sc[2].is_infinite());
@@ -526,4 +530,37 @@ fn starts_are_averaged_by_the_exponential_of_their_score() {
         distinct_starts(&pts, &[1.0, 0.0, 2.0, f64::INFINITY], 0.001),
         vec![1, 0, 2]
     );
+}
+
+#[test]
+fn of_starts_alike_the_shorter_bone_wins() {
+    // σ(cost) ≈ 12.9 px² (50 observations, k = 8). Two starts alike in roughness and motion;
+    // the second fits 6 px² (about half a σ) worse with a 5 % shorter bone: with the
+    // default length weight (20 · ln 1.05 ≈ 0.98 σ) it wins, without it the better fit.
+    let ev = |cost: f64, radius: f64| StartEvidence {
+        cost,
+        roughness: 1e-3,
+        motion: 1.0,
+        children: 0.0,
+        radius,
+    };
+    let starts = [ev(83.0, 0.42), ev(89.0, 0.40)];
+    let on = Some((SMOOTH_WEIGHT, MOTION_WEIGHT, LENGTH_WEIGHT));
+    let off = Some((SMOOTH_WEIGHT, MOTION_WEIGHT, 0.0));
+    assert_eq!(select_start(&starts, 50, 8, on), Some(1));
+    assert_eq!(select_start(&starts, 50, 8, off), Some(0));
+    // 20 px² (1.5 σ) worse: the better fit wins even with the shorter bone.
+    assert_eq!(
+        select_start(&[ev(83.0, 0.42), ev(103.0, 0.40)], 50, 8, on),
+        Some(0)
+    );
+    // The length alone turns the selection on, and the score is relative to the shortest
+    // bone: 20 · ln(0.42 / 0.40) above it.
+    let sc = start_scores(&starts, 50, 8, Some((0.0, 0.0, LENGTH_WEIGHT))).unwrap();
+    let sd = (2.0f64 * 83.0).sqrt() * 83.0 / 83.0;
+    assert!(
+        (sc[0] - LENGTH_WEIGHT * (0.42f64 / 0.40).ln()).abs() < 1e-9,
+        "{sc:?}"
+    );
+    assert!((sc[1] - 6.0 / sd).abs() < 1e-9, "{sc:?}");
 }
