@@ -133,6 +133,11 @@ impl Mixing {
         clock: &Clock,
         s: &mut [f64],
     ) -> usize {
+        debug_assert_eq!(
+            model.adj.len(),
+            model.n,
+            "the model's sparse rows are built"
+        );
         self.load(&model.h, &model.adj, &[], fix);
         self.run(
             fix,

@@ -110,7 +110,8 @@ impl Cut {
     }
 }
 
-/// `f_γ` as a [`Model`]: `base` plus `γ_t g_t` for every cut.
+/// `f_γ` as a [`Model`]: `base` plus `γ_t g_t` for every cut, without the sparse rows
+/// (`adj` left empty: the tree loads their SDPs from the base rows and the cuts).
 pub(crate) fn lagrangian_model(base: &Model, cuts: &[(Cut, f64)]) -> Model {
     let n = base.n;
     let mut m = Model {
@@ -140,15 +141,24 @@ pub(crate) fn lagrangian_model(base: &Model, cuts: &[(Cut, f64)]) -> Model {
         }
         m.k0 += gamma * d;
     }
+    m
+}
+
+/// `model` with its sparse rows built (`adj`, read by [`Mixing::solve`]). The Lagrangian
+/// models of the tree leave them out: their SDPs are loaded from the base rows and the
+/// cuts' terms ([`load_lagrangian`]), and building them cost a few per cent of every node.
+#[cfg(test)]
+pub(crate) fn with_rows(mut m: Model) -> Model {
+    let n = m.n;
     m.adj =
         m.w.chunks_exact(n)
             .enumerate()
             .map(|(i, row)| {
-                // Counted first: one exact allocation per row (this runs several times a node).
-                let nz = |&(j, v): &(usize, &f64)| j != i && *v != 0.0;
-                let mut a = Vec::with_capacity(row.iter().enumerate().filter(nz).count());
-                a.extend(row.iter().enumerate().filter(nz).map(|(j, v)| (j, *v)));
-                a
+                row.iter()
+                    .enumerate()
+                    .filter(|&(j, v)| j != i && *v != 0.0)
+                    .map(|(j, v)| (j, *v))
+                    .collect()
             })
             .collect();
     m
@@ -782,7 +792,7 @@ mod kernel_tests {
         // shift up to rounding. n = 30 (rank 9, stride 12: the padding stays zero).
         let n = 30;
         let (base, cuts, node, _) = case(n, 2, &[(3, 1), (7, 0), (11, 1), (20, 0), (21, 1)]);
-        let lm = lagrangian_model(&base, &cuts);
+        let lm = with_rows(lagrangian_model(&base, &cuts));
         let clock = Clock::new(None);
         for fix in [vec![FREE; n], node] {
             let (mut dense, mut sparse) = (Mixing::new(n), Mixing::new(n));
