@@ -9,7 +9,10 @@
 //! between two sources closer than `merge_radius` is free: they are the same target) and
 //! each attending ray gains what it gains in the frame model of
 //! [`Membership::Partition`](super::Membership::Partition) (`ln(2/h²) + ln((1 − u)/u) −
-//! ln K_t − ½‖d/h‖²`, `K_t` the charges of frame `t`). A source costs the Occam factor of
+//! ½‖d/h‖²`, without that model's mixture weight `− ln K_t`); each charge costs
+//! [`CHARGE_COST`] nats in each frame, a prior on the number `K_t` of a frame's charges
+//! (memberships persist, so the choice of target is paid at the switches, not again in
+//! every frame by every ray). A source costs the Occam factor of
 //! its position once (`ln V − 3/2 ln 2π + ½ ln det A`, `A` the typical information of
 //! its members in a frame), not once per frame. A source's position in frame `t` is the
 //! local-linear fit (position and velocity, the velocity with a `N(0, drift²)` prior per
@@ -30,7 +33,7 @@
 //! by position (gated by their uncertainty plus the drift) when they share members or are
 //! within a metre; then, a few times, the positions are refitted, every person's states
 //! are decoded jointly over the sequence (Viterbi: each person's chain is exact given the
-//! sources and `K_t`; `K_t` and the rule that a charge has `min_members` rays are
+//! sources; `K_t` and the rule that a charge has `min_members` rays are
 //! iterated: in each frame the weakest source with too few rays is closed to the people
 //! present, one per round, so that rays split over two copies of one target meet at the
 //! other), then every pair of people is decoded jointly given the others (pair moves: a
@@ -52,6 +55,16 @@ use super::GazeRays;
 use crate::error::Result;
 use nalgebra::{Matrix3, SMatrix, SVector, Vector3};
 use rayon::prelude::*;
+
+/// Cost (nats) of each charge in each frame: the prior on the number of charges of a
+/// frame, `P(K_t) ∝ e^(−CHARGE_COST · K_t)` (geometric). It replaces the frame model's
+/// mixture weight `− ln K_t` that every attending ray paid every frame: memberships persist
+/// (a person pays [`ModeOptions::switch_cost`] per change of target), so charging the
+/// choice of target again in every frame made a frame's cost of a charge grow with the
+/// number of rays (12 rays × ln 3/2 ≈ 4.9 nats for a third charge) and merged groups
+/// 1.4–1.5 m apart or a group seen in a sequence's last frames (marker scenes 12, 115,
+/// 415). 1, 2 and 3 give the same development misses; 5 merges 115 again.
+const CHARGE_COST: f64 = 2.0;
 
 /// Rounds of (fit positions, decode, drop sources).
 const ROUNDS: usize = 4;
@@ -437,25 +450,10 @@ impl Model<'_> {
         }
     }
 
-    /// Emission of person `p` in frame `t` attending source `k` (`None`: not allowed
-    /// there: no position, outside the bounds, or infinite): with a ray, its gain
-    /// `ln(2/h²) + ln((1 − u)/u) − ln K_t − ½‖d/h‖²`; without one (absent), 0.
-    fn emission(
-        &self,
-        p: usize,
-        t: usize,
-        k: usize,
-        pos: &Positions,
-        k_t: &[usize],
-    ) -> Option<f64> {
-        let e = self.gain(p, t, k, pos)?;
-        Some(match self.row[t][p] {
-            Some(_) => e - (k_t[t].max(1) as f64).ln(),
-            None => e,
-        })
-    }
-
-    /// [`Model::emission`] without the `− ln K_t` term (0 for an absent person).
+    /// Gain of person `p` in frame `t` attending source `k` (`None`: not allowed there: no
+    /// position, outside the bounds, or infinite): with a ray, `ln(2/h²) + ln((1 − u)/u) −
+    /// ½‖d/h‖²`; without one (absent), 0. The charge's cost is the frame's
+    /// ([`CHARGE_COST`]), not the ray's.
     fn gain(&self, p: usize, t: usize, k: usize, pos: &Positions) -> Option<f64> {
         let (x, _) = pos[k][t]?;
         let Some(i) = self.row[t][p] else {
@@ -491,8 +489,8 @@ impl Model<'_> {
         }
     }
 
-    /// The log likelihood of clean `paths` (see [`Model::clean`]): emissions with `K_t`
-    /// the charges of each frame, minus the switch costs.
+    /// The log likelihood of clean `paths` (see [`Model::clean`]): the rays' gains, minus
+    /// the switch costs and [`CHARGE_COST`] per charge and frame.
     fn likelihood(&self, paths: &[Vec<usize>], pos: &Positions) -> f64 {
         let k_t: Vec<usize> = (0..self.frames.len())
             .map(|t| {
@@ -503,8 +501,9 @@ impl Model<'_> {
             })
             .collect();
         (0..self.n_people)
-            .map(|p| self.path_score(p, &paths[p], pos, &k_t))
-            .sum()
+            .map(|p| self.path_score(p, &paths[p], pos))
+            .sum::<f64>()
+            - CHARGE_COST * k_t.iter().sum::<usize>() as f64
     }
 
     /// Pair moves: two people who must change target together (a new pair, each of whom
@@ -512,12 +511,12 @@ impl Model<'_> {
     /// of people, their two paths are decoded jointly given everyone else's (Viterbi over
     /// the pairs of their states: each person's current state, none, and the sources
     /// within [`PAIR_PRUNE`] switch costs of its best gain in the frame), each frame
-    /// scored by the whole frame's likelihood — the `min_members` rule and `K_t` with
-    /// the pair's states, so a source the two make a charge together gains both rays.
+    /// scored by the whole frame's likelihood — the `min_members` rule and the charge
+    /// cost with the pair's states, so a source the two make a charge together gains both rays.
     /// A move opens charges or keeps them, it closes none unless the pair goes to a copy
     /// of the closed source (within `merge_radius`): closing a target is the drops' work,
     /// which weigh its Occam cost and refit the positions (with the positions held, the
-    /// `ln K_t` that every ray saves pulls pairs into neighbouring groups). A move is kept
+    /// charge cost a merge saves pulls pairs into neighbouring groups). A move is kept
     /// when the likelihood of the cleaned paths grows.
     fn pair_moves(&self, paths: &mut [Vec<usize>], pos: &Positions, live: &[bool]) -> Result<()> {
         let (f, n, ns) = (self.frames.len(), self.n_people, live.len() + 1);
@@ -525,7 +524,7 @@ impl Model<'_> {
         if n < 2 || f == 0 {
             return Ok(());
         }
-        // gains[t][p][s]: state s's gain without `− ln K_t` (state 0: none, 0).
+        // gains[t][p][s]: state s's gain (state 0: none, 0).
         let gains: Vec<Vec<Vec<Option<f64>>>> = (0..f)
             .map(|t| {
                 (0..n)
@@ -627,11 +626,10 @@ impl Model<'_> {
                     a_o[path[t]] += gains[t][r][path[t]].unwrap_or(0.0);
                 }
             }
-            let (mut k0, mut n0, mut s0) = (0usize, 0usize, 0.0);
+            let (mut k0, mut s0) = (0usize, 0.0);
             for s in 1..ns {
                 if n_o[s] >= min {
                     k0 += 1;
-                    n0 += n_o[s];
                     s0 += a_o[s];
                 }
             }
@@ -653,7 +651,7 @@ impl Model<'_> {
                 let Some(ga) = gains[t][p][a] else { continue };
                 for &b in &cand(q, t) {
                     let Some(gb) = gains[t][q][b] else { continue };
-                    let (mut k, mut nn, mut sum, mut ok) = (k0, n0, s0, true);
+                    let (mut k, mut sum, mut ok) = (k0, s0, true);
                     let touched: &[usize] = if a == b { &[a][..] } else { &[a, b][..] };
                     for &s in touched {
                         if s == 0 {
@@ -671,11 +669,9 @@ impl Model<'_> {
                             break;
                         }
                         if n_o[s] >= min {
-                            nn += add_n;
                             sum += add_g;
                         } else {
                             k += 1;
-                            nn += now;
                             sum += a_o[s] + add_g;
                         }
                     }
@@ -694,11 +690,7 @@ impl Model<'_> {
                         .iter()
                         .all(|&s| s == 0 || copy(s));
                     if ok && (k >= k_now || merging) {
-                        let v = if k > 0 {
-                            sum - nn as f64 * (k as f64).ln()
-                        } else {
-                            0.0
-                        };
+                        let v = sum - CHARGE_COST * k as f64;
                         layer.push((a, b, v));
                     }
                 }
@@ -726,7 +718,6 @@ impl Model<'_> {
         p: usize,
         pos: &Positions,
         alive: &[bool],
-        k_t: &[usize],
         forbid: &[Vec<bool>],
     ) -> Vec<usize> {
         let f = self.frames.len();
@@ -736,7 +727,7 @@ impl Model<'_> {
                 let present = self.row[t][p].is_some();
                 let mut st = vec![(0usize, 0.0)];
                 for k in (0..alive.len()).filter(|&k| alive[k] && !(present && forbid[t][k])) {
-                    if let Some(e) = self.emission(p, t, k, pos, k_t) {
+                    if let Some(e) = self.gain(p, t, k, pos) {
                         st.push((k + 1, e));
                     }
                 }
@@ -748,14 +739,12 @@ impl Model<'_> {
 
     /// The log score of person `p`'s `path` (emissions with `k_t` charges per frame, minus
     /// the switch costs): what [`Model::decode`] maximises.
-    fn path_score(&self, p: usize, path: &[usize], pos: &Positions, k_t: &[usize]) -> f64 {
+    fn path_score(&self, p: usize, path: &[usize], pos: &Positions) -> f64 {
         (0..path.len())
             .map(|t| {
                 let e = match path[t] {
                     0 => 0.0,
-                    s => self
-                        .emission(p, t, s - 1, pos, k_t)
-                        .unwrap_or(f64::NEG_INFINITY),
+                    s => self.gain(p, t, s - 1, pos).unwrap_or(f64::NEG_INFINITY),
                 };
                 let c = if t > 0 {
                     self.transition(pos, t, path[t - 1], path[t])
@@ -804,11 +793,10 @@ impl Model<'_> {
             for _ in 0..DECODE_ROUNDS {
                 paths = (0..self.n_people)
                     .into_par_iter()
-                    .map(|p| self.decode(p, pos, &live, &k_t, &forbid))
+                    .map(|p| self.decode(p, pos, &live, &forbid))
                     .collect();
                 let out = assign(&paths);
                 let mut settled = true;
-                let k_prev = k_t.clone();
                 for (t, k_now) in k_t.iter_mut().enumerate() {
                     let c = counts(&out, t);
                     let sub: Vec<usize> = (0..alive.len())
@@ -818,7 +806,7 @@ impl Model<'_> {
                         let g = |k: usize| -> f64 {
                             (0..self.n_people)
                                 .filter(|&p| paths[p][t] == k + 1)
-                                .filter_map(|p| self.emission(p, t, k, pos, &k_prev))
+                                .filter_map(|p| self.gain(p, t, k, pos))
                                 .sum()
                         };
                         c[a].cmp(&c[b]).then(g(a).total_cmp(&g(b)))
@@ -851,8 +839,9 @@ impl Model<'_> {
                     *k_now = counts(&out, t).iter().filter(|&&n| n >= min).count();
                 }
                 let total = (0..self.n_people)
-                    .map(|p| self.path_score(p, &paths[p], pos, &k_t))
-                    .sum();
+                    .map(|p| self.path_score(p, &paths[p], pos))
+                    .sum::<f64>()
+                    - CHARGE_COST * k_t.iter().sum::<usize>() as f64;
                 return Ok((out, total));
             }
             unused.into_iter().for_each(|k| live[k] = false);
@@ -1207,16 +1196,37 @@ pub(super) fn joint_window(
     let (_, z, pos, alive) = model.search(z, n_sources)?;
     Ok((0..f)
         .map(|t| {
-            (0..alive.len())
+            let found: Vec<Found> = (0..alive.len())
                 .filter_map(|k| {
                     let members: Vec<usize> =
                         (0..z[t].len()).filter(|&i| z[t][i] == Some(k)).collect();
                     let (x, _) = pos[k][t]?;
                     (alive[k] && members.len() >= opts.min_members).then_some((x, members))
                 })
-                .collect()
+                .collect();
+            merge_copies(found, opts.merge_radius)
         })
         .collect())
+}
+
+/// A frame's charges within `radius` of each other are copies of one target (the
+/// decoding's switches between them are free): they are reported as one, at the position
+/// of the copy with the most members (the first of equals), with all their members.
+fn merge_copies(found: Vec<Found>, radius: f64) -> Vec<Found> {
+    let mut out: Vec<Found> = Vec::with_capacity(found.len());
+    for (x, members) in found {
+        match out.iter_mut().find(|(y, _)| (x - *y).norm() <= radius) {
+            Some((y, m)) => {
+                if members.len() > m.len() {
+                    *y = x;
+                }
+                m.extend(members);
+                m.sort_unstable();
+            }
+            None => out.push((x, members)),
+        }
+    }
+    out
 }
 
 #[cfg(test)]
@@ -1242,7 +1252,8 @@ mod tests {
 
     /// The objective's likelihood term written out for an assignment in which everyone is
     /// present: every ray attending a source with `min_members` rays gains `ln(2/h²) +
-    /// ln((1 − u)/u) − ln K_t − ½‖d/h‖²`, every change of state costs the switch cost.
+    /// ln((1 − u)/u) − ½‖d/h‖²`, every change of state costs the switch cost, every charge
+    /// costs `CHARGE_COST` in every frame.
     fn likelihood(m: &Model, z: &Assign, pos: &Positions) -> f64 {
         let (frames, opts) = (m.frames, m.opts);
         let mut total = 0.0;
@@ -1251,12 +1262,12 @@ mod tests {
             let charges = (0..pos.len())
                 .filter(|&k| count(k) >= opts.min_members)
                 .count();
+            total -= CHARGE_COST * charges as f64;
             for (i, s) in zt.iter().enumerate() {
                 if let Some(k) = *s {
                     assert!(count(k) >= opts.min_members, "a ray attends a non-charge");
                     let (x, _) = pos[k][t].unwrap();
                     total += (2.0 / (frames[t].h[i] * frames[t].h[i])).ln() + m.prior
-                        - (charges as f64).ln()
                         - 0.5 * q_of(&frames[t], i, &x);
                 }
                 if t > 0 && z[t - 1][i] != *s {
@@ -1330,6 +1341,66 @@ mod tests {
             vec![Some((b, cov)); n_frames],
         ];
         (vec![rays; n_frames], pos)
+    }
+
+    #[test]
+    fn copies_within_merge_radius_are_one_charge() {
+        let found = vec![
+            (Vector3::new(0.0, 0.0, 0.0), vec![0, 1]),
+            (Vector3::new(5.0, 0.0, 0.0), vec![2, 3]),
+            (Vector3::new(0.05, 0.0, 0.0), vec![4, 5, 6]),
+            (Vector3::new(0.3, 0.0, 0.0), vec![7, 8]),
+        ];
+        let out = merge_copies(found, 0.2);
+        assert_eq!(
+            out,
+            vec![
+                (Vector3::new(0.05, 0.0, 0.0), vec![0, 1, 4, 5, 6]),
+                (Vector3::new(5.0, 0.0, 0.0), vec![2, 3]),
+                (Vector3::new(0.3, 0.0, 0.0), vec![7, 8]),
+            ]
+        );
+    }
+
+    #[test]
+    fn a_charge_costs_its_frame_not_every_ray() {
+        // Twelve people 3 m from the origin, 20 frames, h = 0.1: 0–5 (along −x) look at
+        // the origin, 6–11 (along +y) at a point 0.4 m above it. With the frame model's
+        // `− ln K_t` on every ray, the second charge cost 12 ln 2 ≈ 8.3 nats per frame,
+        // more than merging the groups misfits their rays: the search merged them (as
+        // it does with CHARGE_COST = 8.3); at CHARGE_COST per frame it keeps both.
+        let (n, h, up) = (20, 0.1, Vector3::new(0.0, 0.0, 0.4));
+        let mut eyes = Vec::new();
+        let mut looks = Vec::new();
+        for j in 0..6 {
+            let (a, b) = ((j % 3) as f64 * 0.4 - 0.4, (j / 3) as f64 * 0.6 - 0.3);
+            eyes.push(Vector3::new(-3.0, a, b));
+            looks.push(Vector3::zeros());
+        }
+        for j in 0..6 {
+            let (a, b) = ((j % 3) as f64 * 0.4 - 0.4, (j / 3) as f64 * 0.6 - 0.3);
+            eyes.push(Vector3::new(a, 3.0, b));
+            looks.push(up);
+        }
+        let v = eyes
+            .iter()
+            .zip(&looks)
+            .map(|(p, x)| (x - p).normalize())
+            .collect();
+        let rays = GazeRays::new(eyes, v, vec![h; 12], None).unwrap();
+        let frames = vec![rays; n];
+        let opts = ModeOptions::default();
+        let m = model(&frames, &opts);
+        let split: Vec<Option<usize>> = (0..12).map(|i| Some(i / 6)).collect();
+        let (_, z, pos, alive) = m.search(vec![split.clone(); n], 2).unwrap();
+        assert!(alive.iter().all(|&a| a), "a source was dropped: {alive:?}");
+        for t in 0..n {
+            assert_eq!(z[t], split, "frame {t}");
+            for (k, x) in [(0, Vector3::zeros()), (1, up)] {
+                let (p, _) = pos[k][t].unwrap();
+                assert!((p - x).norm() < 0.1, "frame {t} source {k} at {p:?}");
+            }
+        }
     }
 
     #[test]
