@@ -500,6 +500,12 @@ impl Model<'_> {
                     .count()
             })
             .collect();
+        self.paths_score(paths, pos, &k_t)
+    }
+
+    /// The paths' scores minus [`CHARGE_COST`] per charge and frame (`k_t` charges in
+    /// frame `t`).
+    fn paths_score(&self, paths: &[Vec<usize>], pos: &Positions, k_t: &[usize]) -> f64 {
         (0..self.n_people)
             .map(|p| self.path_score(p, &paths[p], pos))
             .sum::<f64>()
@@ -737,8 +743,9 @@ impl Model<'_> {
         viterbi(&states, |t, a, b| self.transition(pos, t, a, b))
     }
 
-    /// The log score of person `p`'s `path` (emissions with `k_t` charges per frame, minus
-    /// the switch costs): what [`Model::decode`] maximises.
+    /// The log score of person `p`'s `path` (the rays' gains minus the switch costs; the
+    /// charges' cost is the frame's, see [`Model::paths_score`]): what [`Model::decode`]
+    /// maximises.
     fn path_score(&self, p: usize, path: &[usize], pos: &Positions) -> f64 {
         (0..path.len())
             .map(|t| {
@@ -838,10 +845,7 @@ impl Model<'_> {
                 for (t, k_now) in k_t.iter_mut().enumerate() {
                     *k_now = counts(&out, t).iter().filter(|&&n| n >= min).count();
                 }
-                let total = (0..self.n_people)
-                    .map(|p| self.path_score(p, &paths[p], pos))
-                    .sum::<f64>()
-                    - CHARGE_COST * k_t.iter().sum::<usize>() as f64;
+                let total = self.paths_score(&paths, pos, &k_t);
                 return Ok((out, total));
             }
             unused.into_iter().for_each(|k| live[k] = false);
