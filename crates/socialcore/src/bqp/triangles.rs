@@ -433,12 +433,32 @@ fn scan_row(
     }
 }
 
+/// Most violated first, ties by index: a total order, so the cuts kept do not depend on
+/// how the rows were split between threads.
+fn by_violation(a: &(f64, Cut), b: &(f64, Cut)) -> std::cmp::Ordering {
+    b.0.total_cmp(&a.0).then_with(|| key(&a.1).cmp(&key(&b.1)))
+}
+
+/// Keeps the `keep` first of `found` in [`by_violation`] order (unordered).
+fn keep_most_violated(found: &mut Vec<(f64, Cut)>, keep: usize) {
+    if found.len() > keep {
+        found.select_nth_unstable_by(keep, by_violation);
+        found.truncate(keep);
+    }
+}
+
 /// Most violated cuts at `(x̂, p̂)` not already in `active`, at most `max_new`, violation
 /// above `tol`, most violated first (ties by index order: deterministic). `tol` adapts
 /// for the next call (never below [`SEPARATION_TOL`]): half the weakest violation kept when
 /// many more were found than kept (so that few are collected next time), a quarter of it
 /// when too few were found. `pool` receives the most violated [`POOL_ROOMS`] times as many
-/// as are kept, for [`separate_pool`] until the next scan.
+/// as are kept, for [`separate_pool`] until the next scan, ordered by kind then violation.
+///
+/// Each scanning thread keeps only its most violated [`POOL_ROOMS`] rooms as it goes: a
+/// first scan can find millions of violated triangles (Beasley n = 400: a tenth of a second
+/// of reallocation and page faults with all of them gathered). The rows stop being scanned
+/// once `clock` is out (then the caller stops too): Ctrl-C and the time limit are seen
+/// within one row.
 #[allow(clippy::too_many_arguments)]
 fn separate(
     n: usize,
@@ -449,35 +469,43 @@ fn separate(
     tol: &mut f64,
     pool: &mut Vec<Cut>,
     parallel: bool,
+    clock: &Clock,
 ) -> Vec<Cut> {
     let t = *tol;
-    // Rows `i` scanned in order (on the rayon pool when `parallel`, gathered in order):
-    // the same cuts either way.
-    let found: Vec<(f64, Cut)> = if parallel {
-        use rayon::prelude::*;
-        let scan = |i: usize| {
-            let (mut found, mut worst) = (Vec::new(), Vec::new());
+    let keep = POOL_ROOMS * (max_new + active.len());
+    // (violated cuts counted, the most violated kept, scratch)
+    type Acc = (usize, Vec<(f64, Cut)>, Vec<f64>);
+    let scan = |(mut total, mut found, mut worst): Acc, i: usize| -> Acc {
+        if !clock.out() {
+            let before = found.len();
             super::with_avx2(|| scan_row(n, x, p, i, t, &mut found, &mut worst));
-            found
-        };
-        (0..n).into_par_iter().flat_map_iter(scan).collect()
-    } else {
-        let (mut found, mut worst) = (Vec::new(), Vec::new());
-        super::with_avx2(|| {
-            for i in 0..n {
-                scan_row(n, x, p, i, t, &mut found, &mut worst);
+            total += found.len() - before;
+            if found.len() > 2 * keep {
+                keep_most_violated(&mut found, keep);
             }
-        });
-        found
+        }
+        (total, found, worst)
     };
-    // The pool: the most violated few times `room`, re-checked between scans.
-    let room = max_new + active.len();
-    let mut found = found;
-    let total = found.len();
-    if total > POOL_ROOMS * room {
-        found.select_nth_unstable_by(POOL_ROOMS * room, |a, b| b.0.total_cmp(&a.0));
-        found.truncate(POOL_ROOMS * room);
-    }
+    let (total, mut found) = if parallel {
+        use rayon::prelude::*;
+        (0..n)
+            .into_par_iter()
+            .fold(|| (0, Vec::new(), Vec::new()), scan)
+            .map(|(total, found, _)| (total, found))
+            .reduce(
+                || (0, Vec::new()),
+                |(t1, mut f1), (t2, f2)| {
+                    f1.extend(f2);
+                    keep_most_violated(&mut f1, keep);
+                    (t1 + t2, f1)
+                },
+            )
+    } else {
+        let (total, found, _) = (0..n).fold((0, Vec::new(), Vec::new()), scan);
+        (total, found)
+    };
+    keep_most_violated(&mut found, keep);
+    found.sort_unstable_by(by_violation);
     // The pool grouped by kind (stable): its re-checks then branch predictably.
     pool.clear();
     for kind in 0..8 {
@@ -532,8 +560,7 @@ fn select(
         let room = max_new + active.len();
         if found.len() > room {
             let crowded = total > 4 * room;
-            found.select_nth_unstable_by(room, |a, b| b.0.total_cmp(&a.0));
-            found.truncate(room);
+            keep_most_violated(&mut found, room);
             if crowded {
                 let weakest = found.iter().map(|f| f.0).fold(f64::INFINITY, f64::min);
                 *tol = (0.5 * weakest).max(SEPARATION_TOL);
@@ -542,7 +569,7 @@ fn select(
             *tol = (0.25 * *tol).max(SEPARATION_TOL);
         }
         found.retain(|(_, c)| !active.contains_key(c));
-        found.sort_by(|a, b| b.0.total_cmp(&a.0).then_with(|| key(&a.1).cmp(&key(&b.1))));
+        found.sort_by(by_violation);
         found.truncate(max_new);
         found.into_iter().map(|(_, c)| c).collect()
     }
@@ -687,7 +714,7 @@ pub(crate) fn strengthen(
         }
         super::with_avx2(|| primal(n, mix, &free, &mut x, &mut p));
         let sep = if it % FULL_SCAN_EVERY == 0 {
-            separate(n, &x, &p, &index, n, &mut tol, &mut pool, parallel)
+            separate(n, &x, &p, &index, n, &mut tol, &mut pool, parallel, clock)
         } else {
             separate_pool(&x, &p, n, &index, n, tol, &pool, parallel)
         };
@@ -861,12 +888,8 @@ mod kernel_tests {
         }
     }
 
-    #[test]
-    fn parallel_separation_finds_the_serial_cuts() {
-        // The scan of all triples on the rayon pool against the serial scan, at the SDP
-        // primal of a Beasley n = 70 instance: the same cuts in the same order, and the
-        // same pool.
-        let n = 70;
+    /// The SDP primal of a Beasley instance of `n` variables (seed 3), for separation tests.
+    fn sdp_primal(n: usize) -> (Vec<f64>, Vec<f64>) {
         let base = model_of(&beasley(n, 0.1, 3));
         let clock = Clock::new(None);
         let mut mix = Mixing::new(n);
@@ -874,19 +897,90 @@ mod kernel_tests {
         mix.solve(&base, &free, 100, 1e-7, &clock, &mut vec![0.0; n]);
         let (mut x, mut p) = (vec![0.0; n], vec![0.0; n * n]);
         primal(n, &mix, &free, &mut x, &mut p);
+        (x, p)
+    }
+
+    /// One full separation with nothing active: `(cuts, pool, tol)`.
+    fn scan_all(
+        n: usize,
+        (x, p): (&[f64], &[f64]),
+        max_new: usize,
+        parallel: bool,
+        clock: &Clock,
+    ) -> (Vec<Cut>, Vec<Cut>, f64) {
+        let (mut tol, mut pool) = (SEPARATION_TOL, Vec::new());
+        let cuts = separate(
+            n,
+            x,
+            p,
+            &CutIndex::default(),
+            max_new,
+            &mut tol,
+            &mut pool,
+            parallel,
+            clock,
+        );
+        (cuts, pool, tol)
+    }
+
+    #[test]
+    fn separation_keeps_the_most_violated_while_scanning() {
+        // Few cuts kept per scan (`max_new` = 2: a pool of 32), so every thread trims what
+        // it found many times over: the pool must still be the 32 most violated cuts of
+        // all (ties by index), grouped by kind, and the same serial and parallel.
+        let n = 70;
+        let (x, p) = sdp_primal(n);
+        let mut all = Vec::new();
+        let mut worst = Vec::new();
+        for i in 0..n {
+            scan_row(n, &x, &p, i, SEPARATION_TOL, &mut all, &mut worst);
+        }
+        let keep = POOL_ROOMS * 2;
+        assert!(all.len() > 20 * keep, "{} violated cuts only", all.len());
+        all.sort_by(by_violation);
+        all.truncate(keep);
+        let expected: Vec<Cut> = (0..8)
+            .flat_map(|kind| all.iter().map(|(_, c)| *c).filter(move |c| c.kind == kind))
+            .collect();
+        for parallel in [false, true] {
+            let (cuts, pool, tol) = scan_all(n, (&x, &p), 2, parallel, &Clock::new(None));
+            assert_eq!(pool, expected);
+            assert_eq!(cuts, vec![all[0].1, all[1].1]);
+            // many more found than kept: the tolerance rises to half the weakest kept
+            assert!(tol > SEPARATION_TOL);
+        }
+    }
+
+    #[test]
+    fn separation_stops_when_the_clock_is_out() {
+        // A full scan costs O(n³): with the time limit passed (or Ctrl-C) no row is
+        // scanned, so a root ascent stops within one row of the request.
+        let n = 70;
+        let (x, p) = sdp_primal(n);
+        for (limit, some) in [
+            (None, true),
+            (Some(std::time::Duration::from_nanos(1)), false),
+        ] {
+            let clock = Clock::new(limit);
+            std::thread::sleep(std::time::Duration::from_millis(1));
+            for parallel in [false, true] {
+                let (cuts, pool, _) = scan_all(n, (&x, &p), n, parallel, &clock);
+                assert_eq!(!cuts.is_empty(), some);
+                assert_eq!(!pool.is_empty(), some);
+            }
+        }
+    }
+
+    #[test]
+    fn parallel_separation_finds_the_serial_cuts() {
+        // The scan of all triples on the rayon pool against the serial scan, at the SDP
+        // primal of a Beasley n = 70 instance: the same cuts in the same order, and the
+        // same pool.
+        let n = 70;
+        let (x, p) = sdp_primal(n);
         let mut out = Vec::new();
         for parallel in [false, true] {
-            let (mut tol, mut pool) = (SEPARATION_TOL, Vec::new());
-            let cuts = separate(
-                n,
-                &x,
-                &p,
-                &CutIndex::default(),
-                n,
-                &mut tol,
-                &mut pool,
-                parallel,
-            );
+            let (cuts, pool, tol) = scan_all(n, (&x, &p), n, parallel, &Clock::new(None));
             let again = separate_pool(&x, &p, n, &CutIndex::default(), n, tol, &pool, parallel);
             out.push((cuts, pool, again));
         }
