@@ -452,7 +452,8 @@ fn keep_most_violated(found: &mut Vec<(f64, Cut)>, keep: usize) {
 /// for the next call (never below [`SEPARATION_TOL`]): half the weakest violation kept when
 /// many more were found than kept (so that few are collected next time), a quarter of it
 /// when too few were found. `pool` receives the most violated [`POOL_ROOMS`] times as many
-/// as are kept, for [`separate_pool`] until the next scan, ordered by kind then violation.
+/// as are kept, for [`separate_pool`] until the next scan, grouped by kind (within a kind
+/// in no set order: [`select`] orders what it returns).
 ///
 /// Each scanning thread keeps only its most violated [`POOL_ROOMS`] rooms as it goes: a
 /// first scan can find millions of violated triangles (Beasley n = 400: a tenth of a second
@@ -505,7 +506,6 @@ fn separate(
         (total, found)
     };
     keep_most_violated(&mut found, keep);
-    found.sort_unstable_by(by_violation);
     // The pool grouped by kind (stable): its re-checks then branch predictably.
     pool.clear();
     for kind in 0..8 {
@@ -939,11 +939,15 @@ mod kernel_tests {
         assert!(all.len() > 20 * keep, "{} violated cuts only", all.len());
         all.sort_by(by_violation);
         all.truncate(keep);
-        let expected: Vec<Cut> = (0..8)
-            .flat_map(|kind| all.iter().map(|(_, c)| *c).filter(move |c| c.kind == kind))
-            .collect();
+        let mut expected: Vec<Cut> = all.iter().map(|(_, c)| *c).collect();
+        expected.sort_by_key(key);
         for parallel in [false, true] {
-            let (cuts, pool, tol) = scan_all(n, (&x, &p), 2, parallel, &Clock::new(None));
+            let (cuts, mut pool, tol) = scan_all(n, (&x, &p), 2, parallel, &Clock::new(None));
+            assert!(
+                pool.windows(2).all(|w| w[0].kind <= w[1].kind),
+                "grouped by kind"
+            );
+            pool.sort_by_key(key);
             assert_eq!(pool, expected);
             assert_eq!(cuts, vec![all[0].1, all[1].1]);
             // many more found than kept: the tolerance rises to half the weakest kept
@@ -975,13 +979,14 @@ mod kernel_tests {
     fn parallel_separation_finds_the_serial_cuts() {
         // The scan of all triples on the rayon pool against the serial scan, at the SDP
         // primal of a Beasley n = 70 instance: the same cuts in the same order, and the
-        // same pool.
+        // same pool (as a set) and the same cuts from it.
         let n = 70;
         let (x, p) = sdp_primal(n);
         let mut out = Vec::new();
         for parallel in [false, true] {
-            let (cuts, pool, tol) = scan_all(n, (&x, &p), n, parallel, &Clock::new(None));
+            let (cuts, mut pool, tol) = scan_all(n, (&x, &p), n, parallel, &Clock::new(None));
             let again = separate_pool(&x, &p, n, &CutIndex::default(), n, tol, &pool, parallel);
+            pool.sort_by_key(key);
             out.push((cuts, pool, again));
         }
         assert!(!out[0].0.is_empty());
