@@ -436,3 +436,27 @@ def test_pooled_point_weighs_each_ray_by_its_spread_and_depth():
     assert uniform is not None and np.linalg.norm(uniform - target) > 0.05
     # Rays that meet behind their eyes fix no point in front of them.
     assert _motion_point(p, -v, np.full(3, 0.05), lag, 0.25, start) is None
+
+
+def test_a_posed_frame_stands_for_its_half_frame():
+    """A wearer's pose at an output time within half a frame of its first or last posed
+    frame (or of a frame at the edge of a gap) is that frame's pose; farther out it is
+    absent, and inside a gap longer than ``max_gap`` too (rendered seed 99 lost a frame of
+    joint attention: the video ended 0.011 s before the output time)."""
+    from socialcam.pipeline import _pose_at
+
+    fps = 30.0
+    ts = np.r_[np.arange(5), np.arange(20, 23)] / fps  # a gap of 15 frames
+    R = Rotation.from_rotvec(np.c_[0.1 * ts, ts, np.zeros_like(ts)]).as_matrix()
+    C = np.c_[ts, 2 * ts, np.ones_like(ts)]
+    cams = Cameras(np.eye(3), R, C, times=ts)
+    half = 0.5 / fps
+    t = np.array([ts[0] - 0.9 * half, ts[0] - 1.1 * half, ts[-1] + 0.9 * half,
+                  ts[-1] + 1.1 * half, ts[4] + 0.9 * half, ts[5] - 0.9 * half,
+                  0.5 * (ts[4] + ts[5]), 0.5 * (ts[0] + ts[1])])  # fmt: skip
+    R_at, C_at = _pose_at(cams, t, max_gap=2.0 / fps + 1e-6)
+    for k, frame in [(0, 0), (2, 7), (4, 4), (5, 5)]:
+        np.testing.assert_allclose(C_at[k], C[frame])
+        np.testing.assert_allclose(R_at[k], R[frame])
+    assert np.isnan(C_at[[1, 3, 6]]).all() and np.isnan(R_at[[1, 3, 6]]).all()
+    np.testing.assert_allclose(C_at[7], 0.5 * (C[0] + C[1]))  # interpolated as before

@@ -723,7 +723,12 @@ def _segment_cameras(
 def _pose_at(cams: Cameras, t: FloatArray, max_gap: float) -> tuple[FloatArray, FloatArray]:
     """World→camera rotations ``(T, 3, 3)`` and centres ``(T, 3)`` at times ``t``,
     interpolated (slerp, linear) between the two posed frames around each time when they
-    are at most ``max_gap`` seconds apart (exact hits need one frame); NaN elsewhere."""
+    are at most ``max_gap`` seconds apart; NaN elsewhere, except that a posed frame stands
+    for the half frame on either side of it, as a video frame does: a time that cannot be
+    interpolated (before the first posed frame, after the last, at the edge of a gap) but
+    lies within half the usual spacing of the posed frames (their median, at most
+    ``max_gap / 2``) of one gets that frame's pose. Without it a wearer whose video ends a
+    hundredth of a second before an output time was absent there (rendered seed 99)."""
     from scipy.spatial.transform import Rotation, Slerp  # type: ignore[import-untyped,unused-ignore]
 
     assert cams.times is not None
@@ -732,16 +737,19 @@ def _pose_at(cams: Cameras, t: FloatArray, max_gap: float) -> tuple[FloatArray, 
     C_out = np.full((len(t), 3), np.nan)
     if len(ts) == 0:
         return R_out, C_out
-    j = np.searchsorted(ts, t, side="right") - 1  # frame at or before
     tol = 1e-6
+    half = min(0.5 * float(np.median(np.diff(ts))), 0.5 * max_gap) if len(ts) > 1 else 0.0
+    j = np.searchsorted(ts, t, side="right") - 1  # frame at or before
     for k, tk in enumerate(t):
         a = int(j[k])
         if a >= 0 and abs(ts[a] - tk) <= tol:
             R_out[k], C_out[k] = cams.R[a], cams.C[a]
             continue
         if a < 0 or a + 1 >= len(ts) or ts[a + 1] - ts[a] > max_gap:
-            if a + 1 < len(ts) and abs(ts[a + 1] - tk) <= tol:
-                R_out[k], C_out[k] = cams.R[a + 1], cams.C[a + 1]
+            near = [b for b in (a, a + 1) if 0 <= b < len(ts) and abs(ts[b] - tk) <= half + tol]
+            if near:
+                b = min(near, key=lambda b: abs(ts[b] - tk))
+                R_out[k], C_out[k] = cams.R[b], cams.C[b]
             continue
         w = (tk - ts[a]) / (ts[a + 1] - ts[a])
         s = Slerp([0.0, 1.0], Rotation.from_matrix(cams.R[a : a + 2]))
