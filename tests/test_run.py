@@ -17,6 +17,7 @@ import pytest
 
 from socialcam.cli import main
 from socialcam.pipeline import RunWarning, load_run_config, run
+from socialcam.sfm import reconstruct_videos
 from socialcam.synth.evaluate import run_vs_truth
 from socialcam.synth.render import render_scene
 
@@ -105,6 +106,47 @@ def test_joint_attention_against_truth(first, scene):
     assert ja["found_fraction"] >= 0.6, ja
     assert ja["error_median_m"] < 0.4, ja
     assert acc["error_ratio"] <= 1.2, acc
+
+
+def test_every_wearer_is_posed_to_the_end(first, scene):
+    res, _out = first
+    poses = res.report["poses"]
+    assert poses["registered_fraction"] >= 0.93, poses
+    for n in scene.truth.names:
+        assert res.report["frames_with_gaze"][n] >= 0.85 * 6 * res.report["fps"], n
+
+
+def test_second_mapping_pass_registers_the_keyframes_left_out(scene, tmp_path, monkeypatch):
+    """The red CI of 840e37d, made reproducible. COLMAP's two-view verification draws from
+    its matching threads' own generators, so with 2 threads its inlier sets vary from run to
+    run; in that run (and with every pair's RANSAC seeded at 0, as here) the first mapping
+    pass left wearer1's last 4 of 10 keyframes out (it walks straight ahead after 3.3 s, and
+    they see fewer than COLMAP's 30 triangulated points): 156 of 180 frames posed, wearer1
+    in 42 of 60, and 7 of the 22 joint-attention groups found. With the second pass
+    (``retry_min_inliers``) they are registered: 173 of 180 frames, wearer1 60 of 60."""
+    import pycolmap
+
+    real = pycolmap.match_image_pairs
+
+    def seeded(*args, **kwargs):
+        verification = pycolmap.TwoViewGeometryOptions()
+        verification.ransac.random_seed = 0
+        return real(*args, **{**kwargs, "verification_options": verification})
+
+    monkeypatch.setattr(pycolmap, "match_image_pairs", seeded)
+    with warnings.catch_warnings():
+        warnings.simplefilter("ignore")
+        rec = reconstruct_videos(
+            list(scene.videos),
+            out_dir=tmp_path / "sfm",
+            eye_height=_eye_height(scene.truth),
+            fps=10.0,
+            keyframe_overlap=0.4,
+            progress=False,
+        )
+    posed = {n: float(q.posed.mean()) for n, q in rec.quality.items()}
+    assert min(posed.values()) >= 0.8, posed
+    assert rec.to_dict()["registered_fraction"] >= 0.93, posed
 
 
 def test_rerun_resumes_and_reruns_only_what_changed(first, scene):
