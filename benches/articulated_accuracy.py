@@ -4,8 +4,12 @@ Clips: CMU subject 131 trials 01 and 02 (BVH skeletons, walking) and subject 85 
 (C3D optical markers: each marker is articulated to the marker whose distance to it varies
 least, so the "bone" is only nearly rigid: a real model error). Each clip is cut into
 60-frame windows at 60 Hz seen by one camera per frame orbiting the subject at 1.5 m
-(f = 1000 px). Error: ‖ΔX − ΔX̂‖ / ‖ΔX‖ on the bone vector (stricter than the thesis'
-‖X − X̂‖ / ‖X‖ on world positions, which is also printed for the headline row).
+(f = 1000 px). Error: ‖ΔX − ΔX̂‖ / ‖ΔX‖ on the bone vector. The thesis' footnote 6 divides
+by ‖X‖ on world positions instead, which depends on where the capture's origin lies (here
+a median 1.1-2.0 m from the joints against bones of 0.18-0.22 m, so the same errors read
+several times smaller: session 1
+measured 0.024 for the robust method and 0.055 for the thesis' on the development set,
+seed 0); it is no longer printed, and every target here is read on the bone vector.
 
 Tables: Fig 4.2(c) (error against η_a), Fig 4.3(c) conditions (1 px noise, 5 % root
 error, bone length × 1.05, 5 % missing; target mean ≤ 0.13 over joints with η_a > 1.25)
@@ -165,7 +169,6 @@ def run(
     scale=1.0,
     missing=0.0,
     seed=0,
-    world=False,
 ) -> float:
     F = w.P.shape[0]
     x, rng = observed(w, j, noise, missing, seed)
@@ -173,8 +176,7 @@ def run(
     points = reconstruct(
         w, j, p, x, parent, method=method, noise=noise, scale=scale, missing=missing, seed=seed
     )
-    den = w.P[:, j] if world else w.P[:, j] - w.P[:, p]
-    return float(np.linalg.norm(points - w.P[:, j]) / np.linalg.norm(den))
+    return float(np.linalg.norm(points - w.P[:, j]) / np.linalg.norm(w.P[:, j] - w.P[:, p]))
 
 
 def reconstruct(
