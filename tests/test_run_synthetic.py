@@ -132,6 +132,7 @@ def test_charge_stage_options_leave_the_gaze_frames_unchanged():
         "charge_persistence": 0.0,
         "pair_bridge": 0.0,
         "charge_pooling": 0.0,
+        "charge_continuation": 0.0,
     }
     assert set(changed) == set(CHARGE_STAGE_OPTIONS)
     for field, value in changed.items():
@@ -332,6 +333,10 @@ def test_a_shallow_crossing_is_placed_by_the_rays_of_neighbouring_times():
     times = np.arange(len(frames)) / 10.0
 
     def errors(**options):
+        # the pooling alone: charge_continuation adds the last frame's charge (dropped by
+        # charge_persistence, its mode 0.54 m from the previous one), which moves the
+        # track's best-fixed frames from the middle towards that end
+        options.setdefault("charge_continuation", 0.0)
         charges = _find_charges(frames, times, RunOptions(**options))
         assert all(len(cs) == 1 for cs in charges[1:-1])
         return np.array([np.linalg.norm(cs[0].position - target) for cs in charges[1:-1]])
