@@ -15,7 +15,11 @@ gives the medians over seeds and the pooled ratio (median of every seed's matche
 errors over that of the ego errors, found groups only).
 
 Run: python benches/faces_attention.py OUT_DIR [seed ...] [option=value ...]
-(options are ``FaceOptions`` fields, e.g. ``rigid_turn_rate=0.25``)
+(options are ``FaceOptions`` fields, e.g. ``rigid_turn_rate=0.25``; plus ``oracle=`` any of
+``v``, ``p``, ``h`` (e.g. ``oracle=pv``): a diagnosis, the wearers' exo ray directions ``v``,
+origins ``p`` or bandwidths ``h`` replaced by their true ones (the renderer's head direction,
+eye centre, eye-in-head spread; the rays of people without a camera are left as they are),
+to tell which part of the exo rays makes the matched ratio)
 """
 
 from __future__ import annotations
@@ -23,6 +27,7 @@ from __future__ import annotations
 import dataclasses
 import sys
 from pathlib import Path
+from typing import Any, cast
 
 import numpy as np
 
@@ -37,9 +42,12 @@ def evaluate(out: Path, seed: int, **options: object) -> tuple[float, ...]:
                          audio=False, calibration=False, start_spread=0.0,
                          progress=False).truth  # fmt: skip
     dets, cams = truth_detections(truth, scale=4.0, seed=seed)
+    oracle = str(options.pop("oracle", ""))
     f3 = reconstruct_faces(dets, cams, **options)
     scaled = dataclasses.replace(truth, K=np.stack([c.K[0] for c in cams]))
     r = faces_vs_truth(scaled, dets, f3)
+    if oracle:
+        f3 = with_true_rays(truth, f3, r["owner"], oracle)
     ja = face_joint_attention(truth, f3, r["owner"])
     exo, ego = ja["exo"]["error_median_m"], ja["ego_same_groups"]["error_median_m"]
     m = ja["matched"]
@@ -53,13 +61,40 @@ def evaluate(out: Path, seed: int, **options: object) -> tuple[float, ...]:
 POOL: list[tuple[np.ndarray, np.ndarray]] = []
 
 
+def with_true_rays(truth: object, f3: Any, owner: dict[int, int], parts: str) -> Any:
+    """``f3`` with the wearers' ray origins (``p`` in ``parts``), directions (``v``) and
+    bandwidths (``h``) replaced by the truth at the nearest frame of wearer 0."""
+    t_ = cast(Any, truth)
+    V = len(t_.names)
+    ft = t_.frame_times[0] - t_.start[0]
+    k = np.abs(ft[None] - np.asarray(f3.times)[:, None]).argmin(1)
+    p, v, h = np.array(f3.p), np.array(f3.v), np.array(f3.h)
+    for j, w in owner.items():
+        if w >= V:
+            continue
+        seen = np.isfinite(v[:, j, 0])
+        if "p" in parts:
+            p[seen, j] = t_.eyes[w][k[seen]]
+        if "v" in parts:
+            v[seen, j] = t_.gaze[w][k[seen]]
+        if "h" in parts:
+            h[seen, j] = t_.h[w]
+    return dataclasses.replace(f3, p=p, v=v, h=h)
+
+
 def main(argv: list[str]) -> None:
     out = Path(argv[0])
     opts = {}
     for a in argv[1:]:
         if "=" in a:
             k, v = a.split("=", 1)
-            opts[k] = None if v == "None" else (v == "True" if v in ("True", "False") else float(v))
+            opts[k] = (
+                v
+                if k == "oracle"
+                else None
+                if v == "None"
+                else (v == "True" if v in ("True", "False") else float(v))
+            )
     seeds = [int(a) for a in argv[1:] if "=" not in a] or list(range(1, 13))
     rows = []
     print("seed ratio exo_m ego_m gaze_deg face_instants groups found association | matched: "
