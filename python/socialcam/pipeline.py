@@ -1425,7 +1425,30 @@ def _find_charges(
         charges = _continued(charges, frames, times, opts)
     if opts.charge_pooling > 0:
         charges = _track_fitted(charges, frames, times, opts)
-    return charges
+    return _deduplicated(charges)
+
+
+#: Charges of one frame with the same members this close (metres) are one charge.
+DUPLICATE_RADIUS = 0.01
+
+
+def _deduplicated(charges: Sequence[Sequence[Charge]]) -> list[list[Charge]]:
+    """Each frame's charges without repeats: the track fit (``charge_pooling``) moves a
+    mode and a pair's candidate of the same members to one point; the one with the most
+    ``support`` (then ``magnitude``) is kept."""
+    out: list[list[Charge]] = []
+    for cs in charges:
+        keep: list[Charge] = []
+        for c in sorted(cs, key=lambda c: (-c.support, -c.magnitude)):
+            same = {int(m) for m in c.members}
+            if not any(
+                {int(m) for m in d.members} == same
+                and np.linalg.norm(d.position - c.position) <= DUPLICATE_RADIUS
+                for d in keep
+            ):
+                keep.append(c)
+        out.append([c for c in cs if any(c is d for d in keep)])  # the stage's order
+    return out
 
 
 #: How long (seconds) a charge's track must already be before it is carried on.
