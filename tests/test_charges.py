@@ -375,6 +375,17 @@ def test_partition_does_not_depend_on_mean_shift_convergence():
         )
 
 
+def _marker_window_scores(seed):
+    """``charge_scores`` (right-count fraction, mean error, mean oracle error) of
+    ``find_charges_sequence`` with defaults on marker scene ``seed`` at 100 frames."""
+    scene = synth.marker_check_family(seed, n_frames=100)
+    right, err, oerr = scene.charge_scores(
+        sc.find_charges_sequence(scene.ray_frames(), bounds=tuple(scene.room))
+    )
+    print(f"seed {seed}: right {right:.2f}, error/oracle {err / oerr:.2f}")
+    return right, err, oerr
+
+
 def _heldout_scores(scene, charges):
     """Right-count fraction, mean charge error and mean oracle error (``charge_scores``)."""
     return scene.charge_scores(charges)
@@ -548,11 +559,7 @@ def test_joint_window_moves_pairs_together(seed):
     close a charge 27 loses its pair to a neighbouring group (0.52: with the positions
     held, the ln K_t every ray saves outweighs the misfit); without the copy exception
     408 keeps a group split over two copies of its target (0.92)."""
-    scene = synth.marker_check_family(seed, n_frames=100)
-    right, err, oerr = scene.charge_scores(
-        sc.find_charges_sequence(scene.ray_frames(), bounds=tuple(scene.room))
-    )
-    print(f"seed {seed}: right {right:.2f}, error/oracle {err / oerr:.2f}")
+    right, err, oerr = _marker_window_scores(seed)
     assert right >= 0.95 and err <= 1.25 * oerr
 
 
@@ -567,11 +574,7 @@ def test_joint_window_extends_groups_to_where_they_formed(seed):
     end, its sources refitted and scored by the objective) reach it. Measured at 100
     frames (right count, error/oracle): 1.00 / 0.23, 1.00 / 0.51, 1.00 / 0.28; without
     them 0.91, 0.86 and 0.92 right."""
-    scene = synth.marker_check_family(seed, n_frames=100)
-    right, err, oerr = scene.charge_scores(
-        sc.find_charges_sequence(scene.ray_frames(), bounds=tuple(scene.room))
-    )
-    print(f"seed {seed}: right {right:.2f}, error/oracle {err / oerr:.2f}")
+    right, err, oerr = _marker_window_scores(seed)
     assert right >= 0.97 and err <= 1.25 * oerr
 
 
@@ -584,11 +587,7 @@ def test_joint_window_splits_a_charge_that_holds_two_groups():
     2-means in the gaze model's distance, one side moved to a new source, refitted,
     decoded and scored by the objective) separates them. Measured at 100 frames: right
     count 1.00, error/oracle 0.62; without the split move 0.69 / 0.65."""
-    scene = synth.marker_check_family(1008, n_frames=100)
-    right, err, oerr = scene.charge_scores(
-        sc.find_charges_sequence(scene.ray_frames(), bounds=tuple(scene.room))
-    )
-    print(f"seed 1008: right {right:.2f}, error/oracle {err / oerr:.2f}")
+    right, err, oerr = _marker_window_scores(1008)
     assert right >= 0.97 and err <= 1.25 * oerr
 
 
@@ -601,11 +600,7 @@ def test_joint_window_moves_start_from_the_best_round():
     below the best so far, and starting every move from the best round, reaches 9029 and
     the true count. Measured at 100 frames: right count 1.00, error/oracle 0.43; before
     0.08 / 0.83."""
-    scene = synth.marker_check_family(12, n_frames=100)
-    right, err, oerr = scene.charge_scores(
-        sc.find_charges_sequence(scene.ray_frames(), bounds=tuple(scene.room))
-    )
-    print(f"seed 12: right {right:.2f}, error/oracle {err / oerr:.2f}")
+    right, err, oerr = _marker_window_scores(12)
     assert right >= 0.97 and err <= 1.25 * oerr
 
 
@@ -619,11 +614,7 @@ def test_joint_window_merges_copies_then_extends_a_group():
     the merge move (the copies merged, refitted, decoded, then given their best
     extension) does. Measured at 100 frames: right count 1.00, error/oracle 0.59; without
     the merge move 0.92 / 0.73."""
-    scene = synth.marker_check_family(1218, n_frames=100)
-    right, err, oerr = scene.charge_scores(
-        sc.find_charges_sequence(scene.ray_frames(), bounds=tuple(scene.room))
-    )
-    print(f"seed 1218: right {right:.2f}, error/oracle {err / oerr:.2f}")
+    right, err, oerr = _marker_window_scores(1218)
     assert right >= 0.97 and err <= 1.25 * oerr
 
 
@@ -636,11 +627,7 @@ def test_joint_window_charges_a_frame_per_charge_and_merges_copies(seed, want):
     holds (1.00). 902, 913 (h 0.019, 0.012): the cheaper charge lets a group split over two
     copies of its marker, 4-6 cm apart, in a few frames (0.97, 0.95 right); copies within
     merge_radius are one charge (1.00 both). Measured at 100 frames."""
-    scene = synth.marker_check_family(seed, n_frames=100)
-    right, err, oerr = scene.charge_scores(
-        sc.find_charges_sequence(scene.ray_frames(), bounds=tuple(scene.room))
-    )
-    print(f"seed {seed}: right {right:.2f}, error/oracle {err / oerr:.2f}")
+    right, err, oerr = _marker_window_scores(seed)
     assert right >= want and err <= 1.25 * oerr
 
 

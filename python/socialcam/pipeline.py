@@ -1503,25 +1503,11 @@ def _continued(
             continue
         lo = int(np.searchsorted(t, t[k] - w - 1e-9))
         hi = int(np.searchsorted(t, t[k] + w + 1e-9, side="right"))
-        p, v, h, lag = [], [], [], []
-        for jj, mem in _track_links(out, frames, c, lo, hi, opts):
-            fj = cast(GazeRays, frames[jj])
-            sel = np.isin(fj.ids, mem)
-            p.append(fj.p[sel])
-            v.append(fj.v[sel])
-            h.append(fj.h[sel])
-            lag.append(np.full(int(sel.sum()), t[jj] - t[k]))
-        sel = np.isin(f.ids, members)
-        p.append(f.p[sel])
-        v.append(f.v[sel])
-        h.append(f.h[sel])
-        lag.append(np.zeros(int(sel.sum())))
-        x = _motion_point(
-            np.concatenate(p), np.concatenate(v), np.concatenate(h), np.concatenate(lag),
-            w / 2, c.position,
-        )  # fmt: skip
+        links = [*_track_links(out, frames, c, lo, hi, opts), (k, members)]
+        x = _motion_point(*_track_rays(frames, links, t, t[k]), w / 2, c.position)
         if x is None:
             continue
+        sel = np.isin(f.ids, members)
         d = x[None] - f.p[sel]
         s = np.einsum("ij,ij->i", d, f.v[sel])
         off = np.linalg.norm(d - s[:, None] * f.v[sel], axis=1) / np.maximum(s, 1e-12)
@@ -1631,6 +1617,25 @@ def _track_links(
     return out
 
 
+def _track_rays(
+    frames: Sequence[GazeRays | None],
+    links: Sequence[tuple[int, IntArray]],
+    t: FloatArray,
+    t_ref: float,
+) -> tuple[FloatArray, FloatArray, FloatArray, FloatArray]:
+    """The rays ``p``, ``v`` ((N, 3)), ``h`` and lags ``t − t_ref`` ((N,) seconds) of the
+    members of each ``(frame, members)`` link of a track, for :func:`_motion_point`."""
+    p, v, h, lag = [], [], [], []
+    for j, members in links:
+        f = cast(GazeRays, frames[j])  # a frame with charges has rays
+        sel = np.isin(f.ids, members)
+        p.append(f.p[sel])
+        v.append(f.v[sel])
+        h.append(f.h[sel])
+        lag.append(np.full(int(sel.sum()), t[j] - t_ref))
+    return np.concatenate(p), np.concatenate(v), np.concatenate(h), np.concatenate(lag)
+
+
 def _track_fitted(
     charges: Sequence[Sequence[Charge]],
     frames: Sequence[GazeRays | None],
@@ -1647,18 +1652,8 @@ def _track_fitted(
         hi = int(np.searchsorted(t, t[k] + w + 1e-9, side="right"))
         moved = []
         for c in cs:
-            p, v, h, lag = [], [], [], []
-            for j, members in _track_links(charges, frames, c, lo, hi, opts):
-                f = cast(GazeRays, frames[j])  # a frame with charges has rays
-                sel = np.isin(f.ids, members)
-                p.append(f.p[sel])
-                v.append(f.v[sel])
-                h.append(f.h[sel])
-                lag.append(np.full(int(sel.sum()), t[j] - t[k]))
-            x = _motion_point(
-                np.concatenate(p), np.concatenate(v), np.concatenate(h), np.concatenate(lag),
-                w / 2, c.position,
-            )  # fmt: skip
+            links = _track_links(charges, frames, c, lo, hi, opts)
+            x = _motion_point(*_track_rays(frames, links, t, t[k]), w / 2, c.position)
             moved.append(c if x is None else replace(c, position=x))
         out.append(moved)
     return out
