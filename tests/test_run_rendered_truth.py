@@ -11,7 +11,12 @@ import pytest
 
 from socialcam.pipeline import RunOptions, gaze_and_charges
 from socialcam.synth import render
-from socialcam.synth.evaluate import _calibration_errors, joint_attention, truth_segments
+from socialcam.synth.evaluate import (
+    _calibration_errors,
+    joint_attention,
+    looking_groups,
+    truth_segments,
+)
 
 SEEDS = (1, 2, 3)
 
@@ -113,6 +118,29 @@ def test_joint_attention_is_found_where_wearers_look_together(results):
     # rays aimed at different things); keeping one-frame charges: mean 0.57, red here.
     false = [ja["false_fraction"] for _t, _c, ja in results.values()]
     assert np.mean(false) < 0.53, false
+
+
+def test_looking_groups_are_wearers_settled_on_one_target(results):
+    # the groups joint_attention scores: >= 2 wearers whose truth names one target, looked
+    # at for >= settle seconds, at that target's true position
+    truth = results[1][0]
+    names = list(truth.names)
+    times = np.arange(0.0, 20.0, 0.1)
+    looking = looking_groups(truth, names, times)
+    n = 0
+    for k, groups in enumerate(looking):
+        for members, target in groups:
+            assert len(members) >= 2
+            for i in members:
+                j = int(np.argmin(np.abs(truth.frame_times[i] - truth.start[0] - times[k])))
+                assert truth.target_of[i][j] == truth.target_of[members[0]][j]
+                # wearers' frames are not simultaneous; a target moves <= 1.3 m/s
+                assert np.linalg.norm(truth.regard[i][j] - target) < 0.05
+            n += 1
+    assert n >= 20
+    # a longer settling time only removes groups
+    later = looking_groups(truth, names, times, settle=1.5)
+    assert 0 < sum(map(len, later)) < n
 
 
 def test_a_rendered_near_collinear_stretch_is_carried_by_the_track(tmp_path):

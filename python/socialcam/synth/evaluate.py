@@ -34,6 +34,7 @@ __all__ = [
     "face_joint_attention",
     "faces_vs_truth",
     "joint_attention",
+    "looking_groups",
     "match_faces",
     "run_vs_truth",
     "truth_detections",
@@ -69,37 +70,24 @@ def _truth_at(truth: SceneTruth, v: int, times: FloatArray) -> tuple[Any, FloatA
     return j, np.where(j >= 0, since[np.maximum(j, 0)], np.nan)
 
 
-def joint_attention(
+def looking_groups(
     truth: SceneTruth,
     names: Sequence[str],
     times: FloatArray,
-    charges: Sequence[Sequence[Charge]],
-    to_truth: Any = None,
     *,
-    radius: float = 0.5,
     settle: float = 0.6,
     max_deviation: float = 3.0,
-) -> dict[str, Any]:
-    """Joint-attention figures of ``charges`` (ids index ``names``) at ``times`` (common
-    clock); ``to_truth(X (N, 3)) -> (N, 3)`` maps charge positions into the truth frame.
+) -> list[list[tuple[list[int], FloatArray]]]:
+    """Per time of ``times`` (common clock), the groups of ≥ 2 wearers (indices into
+    ``names``) looking at one target, with that target's true position (3,) in metres.
 
     A wearer looks at a target at a time when its truth says so for at least ``settle``
     seconds and its head has turned there: the primary gaze is within ``max_deviation``
     spreads ``h`` of the true gaze (Sec 3.1; beyond 3 h is a 1 % tail of the model, in
-    practice a head still turning towards the target). ``false_fraction``: the charges none
-    of whose two members look at one thing (settled or not)."""
+    practice a head still turning towards the target)."""
     idx = {n: truth.names.index(n) for n in names if n in truth.names}
     at = {n: _truth_at(truth, v, times) for n, v in idx.items()}
-
-    def code_now(n: str, k: int) -> int | None:
-        """What ``n`` looks at at output time ``k`` (None: unknown, a wall or calibrating)."""
-        if n not in at or at[n][0][k] < 0:
-            return None
-        code = int(truth.target_of[idx[n]][at[n][0][k]])
-        return None if code in (AROUND, CALIBRATION) else code
-
-    errors: list[float] = []
-    n_groups = n_found = n_charges = n_false = 0
+    out: list[list[tuple[list[int], FloatArray]]] = []
     for k in range(len(times)):
         groups: dict[int, list[int]] = {}
         for i, n in enumerate(names):
@@ -117,15 +105,53 @@ def joint_attention(
             if code in (AROUND, CALIBRATION):
                 continue
             groups.setdefault(code, []).append(i)
+        out.append(
+            [
+                (members, truth.regard[idx[names[members[0]]]][at[names[members[0]]][0][k]])
+                for members in groups.values()
+                if len(members) >= 2
+            ]
+        )
+    return out
+
+
+def joint_attention(
+    truth: SceneTruth,
+    names: Sequence[str],
+    times: FloatArray,
+    charges: Sequence[Sequence[Charge]],
+    to_truth: Any = None,
+    *,
+    radius: float = 0.5,
+    settle: float = 0.6,
+    max_deviation: float = 3.0,
+) -> dict[str, Any]:
+    """Joint-attention figures of ``charges`` (ids index ``names``) at ``times`` (common
+    clock); ``to_truth(X (N, 3)) -> (N, 3)`` maps charge positions into the truth frame.
+
+    The groups are :func:`looking_groups`'s (``settle``, ``max_deviation``); a group is
+    found in a frame when a charge of ≥ 2 of its members lies within ``radius`` metres of
+    its target. ``false_fraction``: the charges none of whose two members look at one
+    thing (settled or not)."""
+    idx = {n: truth.names.index(n) for n in names if n in truth.names}
+    at = {n: _truth_at(truth, v, times) for n, v in idx.items()}
+
+    def code_now(n: str, k: int) -> int | None:
+        """What ``n`` looks at at output time ``k`` (None: unknown, a wall or calibrating)."""
+        if n not in at or at[n][0][k] < 0:
+            return None
+        code = int(truth.target_of[idx[n]][at[n][0][k]])
+        return None if code in (AROUND, CALIBRATION) else code
+
+    looking = looking_groups(truth, names, times, settle=settle, max_deviation=max_deviation)
+    errors: list[float] = []
+    n_groups = n_found = n_charges = n_false = 0
+    for k in range(len(times)):
         pos = [
             c.position[None] if to_truth is None else to_truth(c.position[None]) for c in charges[k]
         ]
-        for members in groups.values():
-            if len(members) < 2:
-                continue
+        for members, target in looking[k]:
             n_groups += 1
-            first = names[members[0]]
-            target = truth.regard[idx[first]][at[first][0][k]]
             best = np.inf
             for i, c in enumerate(charges[k]):
                 if len(set(c.members.tolist()) & set(members)) < 2:
