@@ -61,10 +61,11 @@ def test_range_of_motion_segments_are_well_posed(results):
         for v, (t0, t1, y) in enumerate(truth.calibration):
             ft = truth.frame_times[v]
             sel = (ft >= t0) & (ft <= t1)
-            # the wearer steps back and forth towards the point (depth varies by > 1.4×; measured
-            # 1.47-2.1 on seeds 1-3: the steps follow the pillar face normal, not the point) ...
+            # the wearer steps back and forth towards the point: depth ratio 1.94-2.5 over seeds
+            # 1-3, 21, 55, 178, 185, 436 (steps along the pillar face normal instead, as the
+            # renderer did before session 16: 1.10-2.5 over seeds 1-480, 1.47 on seed 3) ...
             depth = np.linalg.norm(y - truth.eyes[v][sel], axis=1)
-            assert depth.max() > 1.4 * depth.min() and depth.min() > 0.3
+            assert depth.max() > 1.8 * depth.min() and depth.min() > 0.3
             # ... and rolls the head about ±15° (the camera turns about the gaze ray)
             tilt = np.degrees(np.arcsin(truth.R[v][sel][:, 0, 2]))  # image x axis vs level
             assert np.ptp(tilt) > 20.0
@@ -76,7 +77,9 @@ def test_range_of_motion_segments_are_well_posed(results):
 
 def test_eq31_calibrates_every_rendered_wearer(results):
     # the targets: v within 0.5°, p within 2 cm, h within 20 %. Measured over seeds
-    # 1-20 (80 wearers): v ≤ 0.48° (median 0.12°), p ≤ 1.1 cm (median 0.2 cm), h ×0.94-1.15.
+    # 1-20 (80 wearers): v ≤ 0.40° (median 0.10°), p ≤ 1.0 cm (median 0.2 cm), h ×0.94-1.15;
+    # over 1-480 (1920 wearers) v median 0.10°, 14 above 0.5° (max 0.96°, the wearers with
+    # h near 2°, whose own v_std is ≥ 0.85°), p ≤ 2.1 cm, h ×0.89-1.24, no fallback.
     # Along the optical axis (no Eq 3.1) v is 4-12° off; a bias of 0.3° in v moves the median.
     v_err = []
     for seed, (_truth, cal, _ja) in results.items():

@@ -581,17 +581,22 @@ def _plan_motion(
         axis = int(np.argmax(np.abs(pos[:2]) / np.array([ax, ay])))
         normal = np.zeros(3)
         normal[axis] = np.sign(pos[axis]) or 1.0
-        side = np.cross([0.0, 0.0, 1.0], normal)
         along = float(np.clip(pos[1 - axis] * 0.3, -0.1, 0.1))
         calib_pts[v] = normal * room.pillar + np.array([0, 0, eye_h[v] - 0.05])
         calib_pts[v][1 - axis] = along
         inside = (t >= c0) & (t < c1)
         if inside.any():
-            # step towards the point to about CALIB_DISTANCE, then move around there
-            approach = max(0.0, float(np.linalg.norm((pos - calib_pts[v])[:2])) - CALIB_DISTANCE)
+            # step towards the point to about CALIB_DISTANCE, then move around there: back
+            # and forth along the line to the point (not the pillar face's normal, which
+            # from a corner of the loop runs nearly across that line: depth ratios down to
+            # 1.1 and one wearer in 1920 whose Eq 3.1 was rightly refused)
+            away = np.r_[(pos - calib_pts[v])[:2], 0.0]
+            dist = float(np.linalg.norm(away))
+            away = away / dist if dist > 1e-9 else normal
+            approach = max(0.0, dist - CALIB_DISTANCE)
             eyes[inside, v] += _range_of_motion(
                 t[inside] - c0, c1 - c0, approach, rng_c
-            ) @ np.stack([side, normal, np.array([0.0, 0.0, 1.0])])
+            ) @ np.stack([np.cross([0.0, 0.0, 1.0], away), away, np.array([0.0, 0.0, 1.0])])
     vel = np.gradient(eyes[:, :, :2], dt, axis=0)
     body_yaw = np.unwrap(np.arctan2(vel[..., 1], vel[..., 0]), axis=0)
     # --- moving targets: Lissajous paths around the pillar
