@@ -285,7 +285,7 @@ def test_head_pivot_lowers_the_direction_error(scene):
     triangulated face. Measured on this scene, with the rotations of the instants untied
     (what each instant alone knows): gaze 4.88 → 3.22° median (circle seeds 2, 3 of 5 s:
     5.20 → 3.31, 4.13 → 2.59); with the default ties: landmarks 3.00 → 1.89 mm, gaze 2.02
-    either way here (dev circles of 10 s: 2.21 → 2.08° median, faces_attention.out.txt)."""
+    either way here (dev circles of 10 s: 2.21 → 2.09° median, faces_attention.out.txt)."""
     truth, _f3, r, _one = scene
     dets, cams = truth_detections(truth, scale=8.0, seed=1)
     scaled = dataclasses.replace(truth, K=np.stack([c.K[0] for c in cams]))

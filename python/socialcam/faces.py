@@ -407,10 +407,14 @@ class FaceOptions:
         triangulated, which adds to what the landmarks' shape says about the rotation:
         measured on rendered circles (seeds 1, 2, 27, 36, 44, detector-like landmarks,
         rotations alone) the per-instant direction error 4.5–4.9° → 3.5–3.7° rms per axis;
-        with the ties, dev circles median gaze 2.21 → 2.08° (see
-        ``benches/faces_attention.out.txt``). A track whose offset comes out larger than
-        ``PIVOT_MAX`` is fitted without the pivot (walking wearers: the pivot's curve is
-        then not a turn). ``None`` = the face turns about the landmarks' mean
+        with the ties, circles median gaze 2.21 → 2.09° (26 dev seeds) and 2.21 → 2.10°
+        (12 never-seen), landmarks 3.1 → 2.2 mm. The gain is in and just after turns
+        (3.2 → 2.6° within 3 instants of one); while a head holds a target (what joint
+        attention scores) the ties already average the instants and the error stays at
+        1.8–2.2° either way (``benches/faces_attention.out.txt``). A track whose offset
+        comes out larger than ``PIVOT_MAX`` is fitted without the pivot (walking wearers:
+        the pivot's curve is then not a turn). ``None`` = the face turns about the
+        landmarks' mean
     single_view : a tracked face (a wearer's, or a track's) seen by ONE camera at an
         instant within ``max_gap`` instants of its multi-view span joins the track there:
         Eq 3.4 and the rigid face place it (the position tied over time at ``smoothness``,
