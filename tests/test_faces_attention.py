@@ -14,6 +14,7 @@ import numpy as np
 import pytest
 from scipy.spatial.transform import Rotation
 
+import socialcam.faces as faces_mod
 from socialcam.faces import (
     _accel_ties,
     _pentadiagonal_marginals,
@@ -24,6 +25,7 @@ from socialcam.faces import (
     fuse_ego_exo,
     reconstruct_faces,
 )
+from socialcam.synth.cameras import look_at
 from socialcam.synth.evaluate import (
     ego_exo_disagreement,
     face_joint_attention,
@@ -275,6 +277,81 @@ def test_turning_rate_ties_reach_the_fit(scene):
     assert r["gaze_deg"] <= 1.02 * r0["gaze_deg"], (r["gaze_deg"], r0["gaze_deg"])
     with pytest.raises(ValueError, match="rigid_turn_accel"):
         reconstruct_faces(dets, cams, rigid_turn_accel=0.0)
+
+
+def test_head_pivot_lowers_the_direction_error(scene):
+    """``rigid_pivot_accel`` (on by default): the face turns about a pivot behind it (here
+    the renderer's eye centre) whose path is smooth, so a turn shows as a shift of the well
+    triangulated face. Measured on this scene, with the rotations of the instants untied
+    (what each instant alone knows): gaze 4.88 → 3.22° median (circle seeds 2, 3 of 5 s:
+    5.20 → 3.31, 4.13 → 2.59); with the default ties: landmarks 3.00 → 1.89 mm, gaze 2.02
+    either way here (dev circles of 10 s: 2.21 → 2.09° median, faces_attention.out.txt)."""
+    truth, _f3, r, _one = scene
+    dets, cams = truth_detections(truth, scale=8.0, seed=1)
+    scaled = dataclasses.replace(truth, K=np.stack([c.K[0] for c in cams]))
+
+    def score(**kw):
+        return faces_vs_truth(scaled, dets, reconstruct_faces(dets, cams, **kw))
+
+    untied = {"rigid_turn_rate": None, "rigid_turn_accel": None}
+    alone, alone0 = score(**untied), score(**untied, rigid_pivot_accel=None)
+    assert alone["gaze_deg"] < 0.8 * alone0["gaze_deg"], (alone["gaze_deg"], alone0["gaze_deg"])
+    r0 = score(rigid_pivot_accel=None)
+    assert r["face_instants"] == r0["face_instants"] and r["association"] >= 0.98
+    assert r["landmark_mm"] < 0.8 * r0["landmark_mm"], (r["landmark_mm"], r0["landmark_mm"])
+    assert r["gaze_deg"] <= 1.02 * r0["gaze_deg"], (r["gaze_deg"], r0["gaze_deg"])
+    with pytest.raises(ValueError, match="rigid_pivot_accel"):
+        reconstruct_faces(dets, cams, rigid_pivot_accel=-0.1)
+
+
+def _pivot_track(seed: int, noise: float = 1.0):
+    """A face turning (yaw ±25°, pitch ±8°) about a pivot 6 cm behind and 3 cm above its
+    landmarks' plane, the pivot drifting slowly; three cameras 1.8 m away over 70°; the
+    arguments of ``_rigid_track`` and the true landmarks."""
+    rng = np.random.default_rng(seed)
+    n = 40
+    times = 0.1 * np.arange(n)
+    S = np.array([[0, 0.032, 0], [0, -0.032, 0], [0.02, 0, -0.03], [0, 0.025, -0.05],
+                  [0, -0.025, -0.05]])  # fmt: skip
+    rot = Rotation.from_euler(
+        "zy",
+        np.c_[25 * np.sin(2 * np.pi * 0.3 * times), 8 * np.sin(1.3 * times + 1)],
+        degrees=True,
+    )
+    pivot = np.c_[0.03 * np.sin(0.5 * times), 0.02 * times, np.full(n, 1.6)]
+    off = S + np.array([0.06, 0.0, -0.03])
+    X = np.stack([rot[t].apply(off) for t in range(n)]) + pivot[:, None]
+    ang = np.radians([-35.0, 0.0, 35.0])
+    Cc = np.c_[1.8 * np.cos(ang), 1.8 * np.sin(ang), np.full(3, 1.7)]
+    Rc = look_at(Cc, np.tile([0.0, 0.0, 1.55], (3, 1)))
+    K = np.array([[1000.0, 0, 640], [0, 1000.0, 480], [0, 0, 1]])
+    step = np.repeat(np.arange(n), 3)
+    slot = np.arange(3 * n)
+    Xc = np.einsum("rij,rpj->rpi", Rc[slot % 3], X[step] - Cc[slot % 3][:, None])
+    uv = Xc[..., :2] / Xc[..., 2:] * 1000.0 + [640, 480]
+    uv += noise * rng.normal(size=uv.shape)
+    args = (np.tile(K, (3 * n, 1, 1)), Rc[slot % 3], Cc[slot % 3], step, slot, uv,
+            np.full(3 * n, noise), X + 0.004 * rng.normal(size=X.shape), np.full(n, 3.0),
+            times, 0.1)  # fmt: skip
+    return args, X
+
+
+def test_rigid_track_with_a_pivot(monkeypatch):
+    """The rigid fit with a head pivot places the landmarks better than the fit about the
+    landmarks' mean (measured 1.19–1.30 → 0.94–0.99 mm mean error on three draws); an
+    offset beyond ``PIVOT_MAX`` falls back to the fit without the pivot."""
+    kw = {"turn_accel": 1.0, "centre_rate": 0.3}
+    for seed in range(3):
+        args, X = _pivot_track(seed)
+        L1, cov1 = faces_mod._rigid_track(*args, **kw, pivot_accel=0.1)
+        L0, cov0 = faces_mod._rigid_track(*args, **kw)
+        e1, e0 = (np.linalg.norm(L - X, axis=-1).mean() for L in (L1, L0))
+        assert e1 < 0.85 * e0, (seed, e1, e0)
+        assert np.isfinite(cov1).all()
+    monkeypatch.setattr(faces_mod, "PIVOT_MAX", 0.0)
+    L2, cov2 = faces_mod._rigid_track(*args, **kw, pivot_accel=0.1)
+    np.testing.assert_array_equal(L2, L0)
+    np.testing.assert_array_equal(cov2, cov0)
 
 
 def test_shape_covariance_is_the_joint_inverses_extra_term():
