@@ -43,8 +43,10 @@
 //! to where it formed, or on to where it breaks up, with the sources it touches refitted
 //! (the rounds hold the positions, so a source seen only after its group formed never
 //! gains the frames before), and the rounds run again from the best one. When no
-//! extension helps (or none is left), a merge move (see `Model::merge`: two copies of a
-//! target merged, then the best extension from there), and when none helps either, a
+//! extension helps (or none is left), a swap move (see `Model::swap`: two sources that
+//! cross exchange their groups from the crossing on), then a merge move (see
+//! `Model::merge`: two copies of a target merged, then the best extension from there),
+//! and when none helps either, a
 //! split move (see `Model::split`) opens a source:
 //! nothing else does, so one charge that holds two groups looking at two near targets
 //! (already merged in the per-frame charges) stayed merged; a source's members in a
@@ -85,6 +87,10 @@ const CHARGE_COST: f64 = 2.0;
 const ROUNDS: usize = 4;
 /// Most extension moves (see [`Model::extend`]) of a search, each followed by rounds.
 const EXTENSIONS: usize = 4;
+/// Most swap moves (see [`Model::swap`]) of a search, each followed by rounds.
+const SWAPS: usize = 4;
+/// Swap proposals (the highest objectives as proposed) decoded again before the choice.
+const SWAP_DECODED: usize = 2;
 /// Most merge moves (see [`Model::merge`]) of a search, each followed by rounds.
 const MERGES: usize = 4;
 /// Merge proposals (the highest objectives as proposed) decoded and extended before the
@@ -162,6 +168,11 @@ struct Model<'a> {
     n_people: usize,
     ln_volume: f64,
     prior: f64,
+    /// Most swap moves of a search ([`SWAPS`]; tests turn them off).
+    swaps: usize,
+    /// Squared Mahalanobis gate of two sources a merge move takes for copies besides
+    /// those within `merge_radius` ([`LINK_GATE`]; tests turn it off with a negative one).
+    merge_gate: f64,
 }
 
 /// Each source's position (and its covariance) per frame, `None` where no ray attends it
@@ -202,6 +213,8 @@ impl<'a> Model<'a> {
             n_people: people.len(),
             ln_volume: volume.ln(),
             prior: ((1.0 - opts.unattended) / opts.unattended).ln(),
+            swaps: SWAPS,
+            merge_gate: LINK_GATE,
         }
     }
 }
@@ -451,6 +464,21 @@ impl Model<'_> {
     fn near(&self, pos: &Positions, t: usize, a: usize, b: usize) -> bool {
         match (pos[a - 1][t], pos[b - 1][t]) {
             (Some((xa, _)), Some((xb, _))) => (xa - xb).norm() <= self.opts.merge_radius,
+            _ => false,
+        }
+    }
+
+    /// Whether sources `a` and `b` are indistinguishable in frame `t`: their positions'
+    /// difference within [`LINK_GATE`] in the squared Mahalanobis distance of their summed
+    /// covariances.
+    fn compatible(&self, pos: &Positions, t: usize, a: usize, b: usize, gate: f64) -> bool {
+        match (pos[a][t], pos[b][t]) {
+            (Some((xa, ca)), Some((xb, cb))) => {
+                let d = xa - xb;
+                (ca + cb)
+                    .cholesky()
+                    .is_some_and(|ch| d.dot(&ch.solve(&d)) <= gate)
+            }
             _ => false,
         }
     }
@@ -906,6 +934,7 @@ impl Model<'_> {
         let mut pos: Positions = vec![vec![None; f]; n_sources];
         let mut rounds: Vec<Round> = Vec::new();
         let (mut round, mut extensions, mut merges, mut splits) = (0, 0, 0, 0);
+        let mut swaps = 0;
         // The best objective so far.
         let mut top = f64::NEG_INFINITY;
         while round < ROUNDS {
@@ -967,6 +996,10 @@ impl Model<'_> {
                 if extensions < EXTENSIONS {
                     moved = self.extend(&best_z, &pos, &alive)?;
                     extensions += usize::from(moved.is_some());
+                }
+                if moved.is_none() && swaps < self.swaps {
+                    moved = self.swap(&best_z, &pos, &alive)?;
+                    swaps += usize::from(moved.is_some());
                 }
                 if moved.is_none() && merges < MERGES {
                     moved = self.merge(&best_z, &pos, &alive)?;
@@ -1170,9 +1203,94 @@ impl Model<'_> {
         })
     }
 
+    /// A move's choice among its proposals `scored`: the `decoded` best (as proposed) are
+    /// decoded again given their positions ([`Model::redecode`]: a person on the wrong
+    /// side of a move, or who looks at a third target, moves) and, with `extend`, given
+    /// their best extension move; the proposal with the highest objective if it beats
+    /// `base`.
+    fn choose(
+        &self,
+        mut scored: Vec<Round>,
+        decoded: usize,
+        base: f64,
+        extend: bool,
+    ) -> Result<Option<Round>> {
+        scored.sort_by(|a, b| b.0.total_cmp(&a.0));
+        let mut best: Option<Round> = None;
+        for (i, mut cand) in scored.into_iter().enumerate() {
+            if i < decoded {
+                cand = self.redecode(cand)?;
+                if extend {
+                    if let Some(e) = self.extend(&cand.1, &cand.2, &cand.3)? {
+                        cand = e;
+                    }
+                }
+            }
+            if cand.0 > base + 1e-9 && best.as_ref().map_or(true, |b| cand.0 > b.0) {
+                best = Some(cand);
+            }
+        }
+        Ok(best)
+    }
+
+    /// Swap moves: two sources that cross (indistinguishable, see [`Model::compatible`],
+    /// where someone changes from one to the other) may have exchanged their groups
+    /// there: each source's fit then follows one group before the crossing and the other
+    /// after it, and the people of both switch target where none did (marker scene 1110:
+    /// two targets 0.66 m apart, their sources 0.1 m apart at the crossing). For each pair
+    /// of live sources `a`, `b` and each frame `t` where a person changes from one to the
+    /// other and the two are indistinguishable at `t − 1` or `t`, everyone's `a` and `b`
+    /// are exchanged from `t` to the end; both are refitted there (from `t −
+    /// pool_frames`) and the proposal is scored by the objective; the [`SWAP_DECODED`]
+    /// best are decoded again. Returns the proposal with the highest objective if it
+    /// beats that of `z`.
+    fn swap(&self, z: &Assign, pos: &Positions, alive: &[bool]) -> Result<Option<Round>> {
+        let f = self.frames.len();
+        let paths = self.paths_of(z);
+        let base = self.objective(z, pos, alive, self.likelihood(&paths, pos));
+        let mut cands: Vec<(usize, usize, usize)> = Vec::new();
+        for path in &paths {
+            for t in 1..f {
+                let (x, y) = (path[t - 1], path[t]);
+                if x == 0 || y == 0 || x == y || !alive[x - 1] || !alive[y - 1] {
+                    continue;
+                }
+                let (a, b) = (x.min(y) - 1, x.max(y) - 1);
+                if [t - 1, t]
+                    .iter()
+                    .any(|&u| self.compatible(pos, u, a, b, LINK_GATE))
+                {
+                    cands.push((a, b, t));
+                }
+            }
+        }
+        cands.sort_unstable();
+        cands.dedup();
+        let mut scored: Vec<Round> = Vec::new();
+        for (a, b, t) in cands {
+            crate::interrupt::check()?;
+            let mut trial = paths.clone();
+            for path in trial.iter_mut() {
+                for s in path[t..].iter_mut() {
+                    if *s == a + 1 {
+                        *s = b + 1;
+                    } else if *s == b + 1 {
+                        *s = a + 1;
+                    }
+                }
+            }
+            scored.push(self.propose(trial, pos, alive, &[a, b], t..f));
+        }
+        self.choose(scored, SWAP_DECODED, base, false)
+    }
+
     /// Merge moves: two copies of one target (sources within `merge_radius` of each
-    /// other in some frames) that split a group between them, while a third group sits
-    /// in the same charge (its own target behind theirs along its rays): extending that
+    /// other in some frames, or both charges there and indistinguishable, see
+    /// [`Model::compatible`]). A group that joins another at its target near the end of
+    /// the sequence fits a source of its own, seen in too few frames for the rounds to
+    /// join the two (marker scene 1136: 0.7–1.1 m from the other's at h = 0.06, over the
+    /// last 8 frames). Two copies may also split a group between them while a third
+    /// group sits in the same charge (its own target behind theirs along its rays): extending that
     /// group to its own source leaves a copy with too few rays, and merging the copies
     /// alone costs the third group's misfit, so neither single move is kept (marker scene
     /// 1218: the true groups score 31 nats more). For each ordered pair of live sources
@@ -1186,12 +1304,19 @@ impl Model<'_> {
         let ns = alive.len();
         let paths = self.paths_of(z);
         let base = self.objective(z, pos, alive, self.likelihood(&paths, pos));
+        let counts: Vec<Vec<usize>> = (0..f).map(|t| self.counts(&paths, t, ns)).collect();
+        let charge_at = |k: usize, t: usize| counts[t][k] >= self.opts.min_members;
         let mut scored: Vec<Round> = Vec::new();
         for a in (0..ns).filter(|&k| alive[k]) {
             for b in (0..ns).filter(|&k| alive[k] && k != a) {
                 crate::interrupt::check()?;
                 let near: Vec<usize> = (0..f)
-                    .filter(|&t| self.near(pos, t, a + 1, b + 1))
+                    .filter(|&t| {
+                        self.near(pos, t, a + 1, b + 1)
+                            || (charge_at(a, t)
+                                && charge_at(b, t)
+                                && self.compatible(pos, t, a, b, self.merge_gate))
+                    })
                     .collect();
                 let (Some(&lo), Some(&last)) = (near.first(), near.last()) else {
                     continue;
@@ -1209,20 +1334,7 @@ impl Model<'_> {
                 scored.push(self.propose(trial, pos, alive, &[a, b], lo..hi));
             }
         }
-        scored.sort_by(|a, b| b.0.total_cmp(&a.0));
-        let mut best: Option<Round> = None;
-        for (i, mut cand) in scored.into_iter().enumerate() {
-            if i < MERGE_DECODED {
-                cand = self.redecode(cand)?;
-                if let Some(e) = self.extend(&cand.1, &cand.2, &cand.3)? {
-                    cand = e;
-                }
-            }
-            if cand.0 > base + 1e-9 && best.as_ref().map_or(true, |b| cand.0 > b.0) {
-                best = Some(cand);
-            }
-        }
-        Ok(best)
+        self.choose(scored, MERGE_DECODED, base, true)
     }
 
     /// Split moves: a source that carries two groups looking at two targets (merged: the
@@ -1352,19 +1464,7 @@ impl Model<'_> {
                 scored.push((j0, z2, pos2, alive2));
             }
         }
-        // The best proposals decoded again given their positions (a person of the wrong
-        // side, or one who looks at a third target, moves); each as proposed or decoded.
-        scored.sort_by(|a, b| b.0.total_cmp(&a.0));
-        let mut best: Option<Round> = None;
-        for (i, mut cand) in scored.into_iter().enumerate() {
-            if i < SPLIT_DECODED {
-                cand = self.redecode(cand)?;
-            }
-            if cand.0 > base + 1e-9 && best.as_ref().map_or(true, |b| cand.0 > b.0) {
-                best = Some(cand);
-            }
-        }
-        Ok(best)
+        self.choose(scored, SPLIT_DECODED, base, false)
     }
 
     /// Two sides of `people` (the members of source `k` in frames `range`), each with
@@ -1720,6 +1820,8 @@ mod tests {
             n_people: n,
             ln_volume: 1000f64.ln(),
             prior: ((1.0 - opts.unattended) / opts.unattended).ln(),
+            swaps: SWAPS,
+            merge_gate: LINK_GATE,
         }
     }
 
@@ -2039,5 +2141,82 @@ mod tests {
             Some(0)
         );
         assert_eq!(select_bandwidth(&[None, None]), None);
+    }
+
+    #[test]
+    fn swap_moves_give_each_group_back_its_source_after_a_crossing() {
+        // 0 and 1 look at the origin, 2 and 3 at a point 0.5 m away, for 40 frames; from
+        // frame 20 the two sources carry each other's group (the per-frame charges linked
+        // across a crossing). Each source's fit then follows one target and then the other,
+        // and everyone's decoding follows it (a switch where both sources pass each other
+        // costs little): no extension, merge or split undoes it. The swap move exchanges
+        // the sources from frame 20 on; without it the search ends with the crossing.
+        let (n, cut) = (40, 20);
+        let (frames, _) = pair_scene(Vector3::new(0.0, 0.5, 0.0), 0.05, n);
+        let opts = ModeOptions::default();
+        let mut m = model(&frames, &opts);
+        let mut z: Assign = vec![vec![Some(0), Some(0), Some(1), Some(1)]; n];
+        for zt in z.iter_mut().skip(cut) {
+            *zt = vec![Some(1), Some(1), Some(0), Some(0)];
+        }
+        let kept = |out: &Assign| {
+            out.iter().all(|zt| zt == &out[0])
+                && out[0][0] == out[0][1]
+                && out[0][2] == out[0][3]
+                && out[0][0].is_some()
+                && out[0][2].is_some()
+                && out[0][0] != out[0][2]
+        };
+        let (_, out, _, _) = m.search(z.clone(), 2).unwrap();
+        assert!(kept(&out), "{out:?}");
+        m.swaps = 0;
+        let (_, out, _, _) = m.search(z, 2).unwrap();
+        assert!(
+            !kept(&out),
+            "the search undid the crossing without swap moves"
+        );
+    }
+
+    #[test]
+    fn merge_moves_take_indistinguishable_sources_beyond_merge_radius() {
+        // Five people on a 6 m ring look at the origin (h = 0.1), each ray 0.25 m off
+        // (alternately to either side), for 12 frames; 0 and 1 held in one source, 2–4 in
+        // another: the two fits lie more than `merge_radius` apart but well within each
+        // other's uncertainty. The merge move with the Mahalanobis gate joins them (one
+        // source, one charge per frame); with copies only within `merge_radius` it
+        // proposes nothing.
+        let (n, h) = (12, 0.1);
+        let eyes: Vec<Vector3<f64>> = (0..5)
+            .map(|i| {
+                let ang = std::f64::consts::TAU * i as f64 / 5.0;
+                Vector3::new(6.0 * ang.cos(), 6.0 * ang.sin(), 0.0)
+            })
+            .collect();
+        let v = eyes
+            .iter()
+            .enumerate()
+            .map(|(i, p)| {
+                let side = Vector3::new(-p.y, p.x, 0.0).normalize();
+                let off = if i % 2 == 0 { 0.25 } else { -0.25 };
+                (side * off - p).normalize()
+            })
+            .collect::<Vec<_>>();
+        let rays = GazeRays::new(eyes, v, vec![h; 5], None).unwrap();
+        let frames = vec![rays; n];
+        let opts = ModeOptions::default();
+        let mut m = model(&frames, &opts);
+        let z: Assign = vec![vec![Some(0), Some(0), Some(1), Some(1), Some(1)]; n];
+        let pos: Positions = (0..2).map(|k| m.fit(&z, k, &vec![None; n])).collect();
+        let (x0, x1) = (pos[0][0].unwrap().0, pos[1][0].unwrap().0);
+        assert!((x0 - x1).norm() > opts.merge_radius, "{x0} {x1}");
+        let (_, out, _, alive) = m.merge(&z, &pos, &[true, true]).unwrap().expect("a merge");
+        assert_eq!(alive.iter().filter(|&&a| a).count(), 1);
+        assert!(
+            out.iter()
+                .all(|zt| zt.iter().all(|s| s.is_some() && *s == zt[0])),
+            "{out:?}"
+        );
+        m.merge_gate = -1.0;
+        assert!(m.merge(&z, &pos, &[true, true]).unwrap().is_none());
     }
 }
