@@ -173,9 +173,6 @@ struct Model<'a> {
     /// Squared Mahalanobis gate of two sources a merge move takes for copies besides
     /// those within `merge_radius` ([`LINK_GATE`]; tests turn it off with a negative one).
     merge_gate: f64,
-    /// Whether a merge move also takes the last run of copies and reaches back to its
-    /// people's change of target (see [`Model::joined`]; tests turn it off).
-    merge_runs: bool,
 }
 
 /// Each source's position (and its covariance) per frame, `None` where no ray attends it
@@ -218,7 +215,6 @@ impl<'a> Model<'a> {
             prior: ((1.0 - opts.unattended) / opts.unattended).ln(),
             swaps: SWAPS,
             merge_gate: LINK_GATE,
-            merge_runs: true,
         }
     }
 }
@@ -1322,85 +1318,23 @@ impl Model<'_> {
                                 && self.compatible(pos, t, a, b, self.merge_gate))
                     })
                     .collect();
-                let (Some(&first), Some(&last)) = (near.first(), near.last()) else {
+                let (Some(&lo), Some(&last)) = (near.first(), near.last()) else {
                     continue;
                 };
-                // The span of all those frames and, when they are not contiguous, the last
-                // run of them (a source that slides after a group to another target is a
-                // copy of it only from some frames after the change, marker scene 1377).
-                let run = near
-                    .windows(2)
-                    .rev()
-                    .find(|w| w[1] > w[0] + 1)
-                    .map_or(first, |w| w[1]);
-                let mut ranges = vec![first];
-                if run > first && self.merge_runs {
-                    ranges.push(run);
-                }
                 let hi = last + 1;
-                for lo in ranges {
-                    let mut trial = paths.clone();
-                    for path in trial.iter_mut() {
-                        for s in path[lo..hi].iter_mut().filter(|s| **s == b + 1) {
-                            *s = a + 1;
-                        }
+                let mut trial = paths.clone();
+                for path in trial.iter_mut() {
+                    for s in path[lo..hi].iter_mut().filter(|s| **s == b + 1) {
+                        *s = a + 1;
                     }
-                    if trial == paths {
-                        continue;
-                    }
-                    // `b`'s people at `lo` may have looked at `a`'s target since before:
-                    // the range also from their change of target (see `Model::joined`).
-                    let from = self.joined(&paths, pos, a, b, lo);
-                    if from < lo {
-                        let mut early = trial.clone();
-                        for (path, old) in early.iter_mut().zip(&paths) {
-                            if old[lo] == b + 1 {
-                                path[from..lo].iter_mut().for_each(|s| *s = a + 1);
-                            }
-                        }
-                        scored.push(self.propose(early, pos, alive, &[a, b], from..hi));
-                    }
-                    scored.push(self.propose(trial, pos, alive, &[a, b], lo..hi));
                 }
+                if trial == paths {
+                    continue;
+                }
+                scored.push(self.propose(trial, pos, alive, &[a, b], lo..hi));
             }
         }
         self.choose(scored, MERGE_DECODED, base, true)
-    }
-
-    /// The first frame of the run ending at `lo` in which every person of source `b` at
-    /// `lo` attends `b` and, where present, looks at source `a` (its ray within
-    /// [`LINK_GATE`] of `a`'s position in `‖d/h‖²`): a group that moves to another
-    /// group's target keeps its old source, whose fit slides after it, so the two become
-    /// indistinguishable only some frames after the group's change of target (marker
-    /// scene 1377: from 11 frames after the change).
-    fn joined(
-        &self,
-        paths: &[Vec<usize>],
-        pos: &Positions,
-        a: usize,
-        b: usize,
-        lo: usize,
-    ) -> usize {
-        let group: Vec<usize> = (0..self.n_people)
-            .filter(|&q| paths[q][lo] == b + 1)
-            .collect();
-        if group.is_empty() || !self.merge_runs {
-            return lo;
-        }
-        let looks = |u: usize| {
-            let Some((x, _)) = pos[a][u] else {
-                return false;
-            };
-            group.iter().all(|&q| {
-                paths[q][u] == b + 1
-                    && self.row[u][q].map_or(true, |i| q_of(&self.frames[u], i, &x) <= LINK_GATE)
-            })
-        };
-        let mut from = lo;
-        while from > 0 && looks(from - 1) {
-            from -= 1;
-        }
-        from
     }
 
     /// Split moves: a source that carries two groups looking at two targets (merged: the
@@ -1888,7 +1822,6 @@ mod tests {
             prior: ((1.0 - opts.unattended) / opts.unattended).ln(),
             swaps: SWAPS,
             merge_gate: LINK_GATE,
-            merge_runs: true,
         }
     }
 
@@ -2285,58 +2218,5 @@ mod tests {
         );
         m.merge_gate = -1.0;
         assert!(m.merge(&z, &pos, &[true, true]).unwrap().is_none());
-    }
-
-    #[test]
-    fn merge_moves_reach_back_to_a_group_change_of_target() {
-        // 0–3 look at the origin for 40 frames; 4 and 5 look at a point 2.8 m away and,
-        // from frame 20, at the origin too, held in a source of their own all along: its
-        // fit slides after them and is a copy of the origin's only some frames after 20
-        // (and, by chance, in frame 3: the copies' frames are not contiguous). The merge
-        // move from the last run of copies back to 4 and 5's change of target leaves one
-        // charge from frame 20 on; the span of the copies (from frame 3) is no merge.
-        let (n, cut, h) = (40, 20, 0.06);
-        let far = Vector3::new(2.8, 0.0, 0.0);
-        let eyes: Vec<Vector3<f64>> = (0..6)
-            .map(|i| {
-                let ang = std::f64::consts::TAU * i as f64 / 6.0 + 0.3;
-                Vector3::new(1.4 + 4.0 * ang.cos(), 4.0 * ang.sin(), 0.5)
-            })
-            .collect();
-        let frames: Vec<GazeRays> = (0..n)
-            .map(|t| {
-                let v = eyes
-                    .iter()
-                    .enumerate()
-                    .map(|(i, p)| {
-                        let x = if i >= 4 && t < cut {
-                            far
-                        } else {
-                            Vector3::zeros()
-                        };
-                        (x - p).normalize()
-                    })
-                    .collect();
-                GazeRays::new(eyes.clone(), v, vec![h; 6], None).unwrap()
-            })
-            .collect();
-        let opts = ModeOptions::default();
-        let mut m = model(&frames, &opts);
-        let z: Assign = vec![vec![Some(0), Some(0), Some(0), Some(0), Some(1), Some(1)]; n];
-        let mut pos: Positions = (0..2).map(|k| m.fit(&z, k, &vec![None; n])).collect();
-        pos[1][3] = pos[0][3];
-        let ok = |out: &Assign| {
-            out.iter().enumerate().all(|(t, zt)| {
-                zt[..4].iter().all(|&s| s == zt[0])
-                    && zt[4] == zt[5]
-                    && zt[4].is_some()
-                    && (zt[4] == zt[0]) == (t >= cut)
-            })
-        };
-        let (_, out, _, _) = m.merge(&z, &pos, &[true, true]).unwrap().expect("a merge");
-        assert!(ok(&out), "{out:?}");
-        m.merge_runs = false;
-        let out = m.merge(&z, &pos, &[true, true]).unwrap();
-        assert!(out.map_or(true, |r| !ok(&r.1)), "merged without the runs");
     }
 }
