@@ -144,6 +144,17 @@ def test_looking_groups_are_wearers_settled_on_one_target(results):
     # a longer settling time only removes groups
     later = looking_groups(truth, names, times, settle=1.5)
     assert 0 < sum(map(len, later)) < n
+    # bad input names the argument
+    for kw, name in [
+        (dict(times=np.full(3, np.nan)), "times"),
+        (dict(times=np.zeros((2, 2))), "times"),
+        (dict(settle=-1.0), "settle"),
+        (dict(max_deviation=0.0), "max_deviation"),
+        (dict(max_deviation=float("nan")), "max_deviation"),
+    ]:
+        args = {"times": times, **kw}
+        with pytest.raises(ValueError, match=name):
+            looking_groups(truth, names, args.pop("times"), **args)
 
 
 def test_a_rendered_near_collinear_stretch_is_carried_by_the_track(tmp_path):

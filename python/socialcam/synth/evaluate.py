@@ -24,7 +24,7 @@ from typing import Any
 
 import numpy as np
 
-from socialcam._validate import FloatArray
+from socialcam._validate import FloatArray, as_float_array, check_float
 from socialcam.charges import Charge
 from socialcam.geometry import align_similarity
 from socialcam.synth.render import AROUND, CALIBRATION, HEAD, SceneTruth
@@ -85,6 +85,9 @@ def looking_groups(
     seconds and its head has turned there: the primary gaze is within ``max_deviation``
     spreads ``h`` of the true gaze (Sec 3.1; beyond 3 h is a 1 % tail of the model, in
     practice a head still turning towards the target)."""
+    times = as_float_array(times, "times", (None,))
+    settle = check_float(settle, "settle", min=0.0)
+    max_deviation = check_float(max_deviation, "max_deviation", min=0.0, min_exclusive=True)
     idx = {n: truth.names.index(n) for n in names if n in truth.names}
     at = {n: _truth_at(truth, v, times) for n, v in idx.items()}
     out: list[list[tuple[list[int], FloatArray]]] = []
