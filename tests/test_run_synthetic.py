@@ -309,6 +309,36 @@ def test_a_pair_whose_eyes_stray_apart_keeps_its_charge():
         RunOptions(pair_bridge=-0.1)
 
 
+def test_a_target_handed_on_as_a_wearers_poses_end_keeps_its_charge():
+    # wearers 0 and 2 look at one target; wearer 2's poses end, and wearer 1, who turned
+    # to the target just before, is its new partner until the clip ends: only the pair's
+    # candidate holds 0 and 1 (their eyes stray apart), and the only mode before it is
+    # (0, 2)'s. The side after is unobserved, so a mode sharing one member suffices.
+    from socialcam.charges import GazeRays
+    from socialcam.pipeline import _find_charges
+
+    h = 0.02
+    eyes = np.array([[0.0, 0.0, 1.6], [3.0, 0.0, 1.6], [0.0, 3.0, 1.6]])
+    target = np.array([1.5, 2.0, 1.4])
+    u = (target - eyes) / np.linalg.norm(target - eyes, axis=1, keepdims=True)
+    wall = np.array([1.0, -1.0, 0.0])  # wearer 1 looks at a wall first
+    watched = GazeRays(eyes, np.array([u[0], wall, u[2]]), h, normalize=True)
+    look = u[:2] + np.outer([2.5 * h, -2.5 * h], [0.0, 0.0, 1.0])
+    handed = GazeRays(eyes[:2], look, h, normalize=True)
+    frames = [watched] * 6 + [handed] * 3
+    times = np.arange(len(frames)) / 10.0
+    kept = _find_charges(frames, times, RunOptions())
+    assert [len(cs) for cs in kept] == [1] * len(frames)
+    for cs in kept[6:]:
+        assert sorted(cs[0].members.tolist()) == [0, 1]
+        assert np.linalg.norm(cs[0].position - target) < 0.05
+    # observed on both sides, one shared member is not enough: (0, 1)'s candidate
+    # between two modes of (0, 2) is no charge
+    mid = [watched] * 6 + [handed] * 2 + [watched] * 6
+    kept = _find_charges(mid, np.arange(len(mid)) / 10.0, RunOptions())
+    assert [len(cs) for cs in kept] == [1] * 6 + [0] * 2 + [1] * 6
+
+
 def test_a_shallow_crossing_is_placed_by_the_rays_of_neighbouring_times():
     # charge_pooling: two wearers 0.8 m apart look at a target 4 m away, the rays cross at
     # ~11 deg; one wearer's eyes jitter 2.5 h left and right of the head's ray at 2.5 Hz
