@@ -19,7 +19,11 @@ Run: python benches/faces_attention.py OUT_DIR [seed ...] [option=value ...]
 ``v``, ``p``, ``h`` (e.g. ``oracle=pv``): a diagnosis, the wearers' exo ray directions ``v``,
 origins ``p`` or bandwidths ``h`` replaced by their true ones (the renderer's head direction,
 eye centre, eye-in-head spread; the rays of people without a camera are left as they are),
-to tell which part of the exo rays makes the matched ratio)
+to tell which part of the exo rays makes the matched ratio; or ``m``: the wearers' exo ray
+directions while they hold a target (0.5 s after a change of target) replaced by the true
+head direction averaged over that hold, turned by ``hold_error=`` degrees (default 0) in a
+random direction per hold (seeded): what a perfect hold/turn smoother of the head direction
+could reach)
 """
 
 from __future__ import annotations
@@ -43,11 +47,12 @@ def evaluate(out: Path, seed: int, **options: object) -> tuple[float, ...]:
                          progress=False).truth  # fmt: skip
     dets, cams = truth_detections(truth, scale=4.0, seed=seed)
     oracle = str(options.pop("oracle", ""))
+    hold_error = float(cast(float, options.pop("hold_error", 0.0)))
     f3 = reconstruct_faces(dets, cams, **options)
     scaled = dataclasses.replace(truth, K=np.stack([c.K[0] for c in cams]))
     r = faces_vs_truth(scaled, dets, f3)
     if oracle:
-        f3 = with_true_rays(truth, f3, r["owner"], oracle)
+        f3 = with_true_rays(truth, f3, r["owner"], oracle, hold_error, seed)
     ja = face_joint_attention(truth, f3, r["owner"])
     exo, ego = ja["exo"]["error_median_m"], ja["ego_same_groups"]["error_median_m"]
     m = ja["matched"]
@@ -61,18 +66,42 @@ def evaluate(out: Path, seed: int, **options: object) -> tuple[float, ...]:
 POOL: list[tuple[np.ndarray, np.ndarray]] = []
 
 
-def with_true_rays(truth: object, f3: Any, owner: dict[int, int], parts: str) -> Any:
+def with_true_rays(
+    truth: object, f3: Any, owner: dict[int, int], parts: str, hold_error: float = 0.0,
+    seed: int = 0,
+) -> Any:  # fmt: skip
     """``f3`` with the wearers' ray origins (``p`` in ``parts``), directions (``v``) and
-    bandwidths (``h``) replaced by the truth at the nearest frame of wearer 0."""
+    bandwidths (``h``) replaced by the truth at the nearest frame of wearer 0; ``m``: the
+    directions during holds by the true hold-mean head direction, ``hold_error`` degrees
+    off (see the module docstring)."""
     t_ = cast(Any, truth)
     V = len(t_.names)
     ft = t_.frame_times[0] - t_.start[0]
     k = np.abs(ft[None] - np.asarray(f3.times)[:, None]).argmin(1)
     p, v, h = np.array(f3.p), np.array(f3.v), np.array(f3.h)
+    codes = t_.face_target[0]
+    since = np.zeros(codes.shape)
+    for i in range(1, len(codes)):
+        since[i] = np.where(codes[i] == codes[i - 1], since[i - 1] + ft[i] - ft[i - 1], 0.0)
+    rng = np.random.default_rng(1000 + seed)
     for j, w in owner.items():
         if w >= V:
             continue
         seen = np.isfinite(v[:, j, 0])
+        if "m" in parts:
+            ts = np.nonzero(seen)[0]
+            s = since[k[ts], w]
+            run = np.cumsum(np.r_[1, s[1:] <= s[:-1]])
+            for r in np.unique(run):
+                sel = ts[(run == r) & (s >= 0.5)]
+                if len(sel):
+                    m = t_.face_normal[0][k[sel], w].mean(0)
+                    m /= np.linalg.norm(m)
+                    d = rng.normal(size=3)
+                    d -= (d @ m) * m
+                    d /= np.linalg.norm(d)
+                    a = np.radians(hold_error)
+                    v[sel, j] = np.cos(a) * m + np.sin(a) * d
         if "p" in parts:
             p[seen, j] = t_.eyes[w][k[seen]]
         if "v" in parts:

@@ -430,3 +430,44 @@ def test_ransac_only_association_does_not_crash(scene):
     dets, cams = truth_detections(truth, scale=8.0, seed=1)
     f3 = reconstruct_faces(dets, cams, anchors=False)
     assert f3.landmarks.shape[1] > 0 and np.isfinite(f3.v[..., 0]).sum() > 100
+
+
+def test_bench_oracle_hold_means(scene):
+    """``benches/faces_attention.py oracle=m``: while a wearer holds a target (0.5 s after
+    a change of code), its exo direction becomes the true head direction averaged over that
+    hold, turned ``hold_error`` degrees; elsewhere (and for the people without a camera)
+    the reconstructed direction is kept."""
+    import importlib.util
+    from pathlib import Path
+
+    path = Path(__file__).resolve().parents[1] / "benches" / "faces_attention.py"
+    spec = importlib.util.spec_from_file_location("faces_attention_bench", path)
+    assert spec is not None and spec.loader is not None
+    bench = importlib.util.module_from_spec(spec)
+    spec.loader.exec_module(bench)
+    truth, f3, r, _one = scene
+    V = len(truth.names)
+    ft = truth.frame_times[0] - truth.start[0]
+    k = np.abs(ft[None] - np.asarray(f3.times)[:, None]).argmin(1)
+    codes = truth.face_target[0]
+    exact = bench.with_true_rays(truth, f3, r["owner"], "m", 0.0, 1)
+    off = bench.with_true_rays(truth, f3, r["owner"], "m", 2.0, 1)
+    replaced = 0
+    for j, w in r["owner"].items():
+        seen = np.nonzero(np.isfinite(f3.v[:, j, 0]))[0]
+        moved = seen[~np.all(np.isclose(exact.v[seen, j], f3.v[seen, j]), axis=1)]
+        if w >= V:
+            assert len(moved) == 0
+            continue
+        # runs of consecutive replaced instants with one code: one hold each
+        cut = np.nonzero((np.diff(moved) > 1) | (np.diff(codes[k[moved], w]) != 0))[0] + 1
+        for run in np.split(moved, cut):
+            if len(run) == 0:
+                continue
+            m = truth.face_normal[0][k[run], w].mean(0)
+            m /= np.linalg.norm(m)
+            assert np.allclose(exact.v[run, j], m, atol=1e-9)
+            ang = np.degrees(np.arccos(np.clip(off.v[run, j] @ m, -1, 1)))
+            assert np.allclose(ang, 2.0, atol=1e-6)
+            replaced += len(run)
+    assert replaced > 50, replaced
