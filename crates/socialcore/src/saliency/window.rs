@@ -173,6 +173,9 @@ struct Model<'a> {
     /// Squared Mahalanobis gate of two sources a merge move takes for copies besides
     /// those within `merge_radius` ([`LINK_GATE`]; tests turn it off with a negative one).
     merge_gate: f64,
+    /// Whether a merge move also takes the last run of the copies' frames when they are
+    /// not contiguous (see [`Model::merge`]; tests turn it off).
+    merge_runs: bool,
 }
 
 /// Each source's position (and its covariance) per frame, `None` where no ray attends it
@@ -215,6 +218,7 @@ impl<'a> Model<'a> {
             prior: ((1.0 - opts.unattended) / opts.unattended).ln(),
             swaps: SWAPS,
             merge_gate: LINK_GATE,
+            merge_runs: true,
         }
     }
 }
@@ -1295,10 +1299,17 @@ impl Model<'_> {
     /// alone costs the third group's misfit, so neither single move is kept (marker scene
     /// 1218: the true groups score 31 nats more). For each ordered pair of live sources
     /// `a`, `b` that are copies in some frames, `b`'s people move to `a` from the first to
-    /// the last of those frames; both are refitted there (± `pool_frames`) and scored by
-    /// the objective; the [`MERGE_DECODED`] best are decoded again and then given their
-    /// best extension move ([`Model::extend`]). Returns the proposal with the highest
-    /// objective if it beats that of `z`.
+    /// the last of those frames and, when those frames are not contiguous, also from the
+    /// first of their last run: a group that moves to another group's target keeps its
+    /// old source, whose fit slides after it, so the two are copies only some frames after
+    /// the change, and they may have been copies by chance long before (marker scene 1377:
+    /// frames 40–41 and 85–99 for a pair that changed target at frame 74; the merge over
+    /// 40–99 scores 103 nats below the window's, that over 85–99 23–27 above, and its
+    /// extension reaches back to the change). Both sources are refitted there (±
+    /// `pool_frames`) and each proposal is scored by the objective; the [`MERGE_DECODED`]
+    /// best are decoded again and then given their best extension move
+    /// ([`Model::extend`]). Returns the proposal with the highest objective if it beats
+    /// that of `z`.
     fn merge(&self, z: &Assign, pos: &Positions, alive: &[bool]) -> Result<Option<Round>> {
         let f = self.frames.len();
         let ns = alive.len();
@@ -1318,20 +1329,36 @@ impl Model<'_> {
                                 && self.compatible(pos, t, a, b, self.merge_gate))
                     })
                     .collect();
-                let (Some(&lo), Some(&last)) = (near.first(), near.last()) else {
+                let (Some(&first), Some(&last)) = (near.first(), near.last()) else {
                     continue;
                 };
+                // The span of those frames and, when they are not contiguous, their last
+                // run: two sources may be copies by chance in a few frames long before a
+                // group joins another at its target (marker scene 1377: frames 40-41, then
+                // from 85 on), and the merge over the whole span costs the frames between.
+                let run = near
+                    .windows(2)
+                    .rev()
+                    .find(|w| w[1] > w[0] + 1)
+                    .map_or(first, |w| w[1]);
+                let starts: &[usize] = if run > first && self.merge_runs {
+                    &[first, run]
+                } else {
+                    &[first]
+                };
                 let hi = last + 1;
-                let mut trial = paths.clone();
-                for path in trial.iter_mut() {
-                    for s in path[lo..hi].iter_mut().filter(|s| **s == b + 1) {
-                        *s = a + 1;
+                for &lo in starts {
+                    let mut trial = paths.clone();
+                    for path in trial.iter_mut() {
+                        for s in path[lo..hi].iter_mut().filter(|s| **s == b + 1) {
+                            *s = a + 1;
+                        }
                     }
+                    if trial == paths {
+                        continue;
+                    }
+                    scored.push(self.propose(trial, pos, alive, &[a, b], lo..hi));
                 }
-                if trial == paths {
-                    continue;
-                }
-                scored.push(self.propose(trial, pos, alive, &[a, b], lo..hi));
             }
         }
         self.choose(scored, MERGE_DECODED, base, true)
@@ -1822,6 +1849,7 @@ mod tests {
             prior: ((1.0 - opts.unattended) / opts.unattended).ln(),
             swaps: SWAPS,
             merge_gate: LINK_GATE,
+            merge_runs: true,
         }
     }
 
@@ -2218,5 +2246,62 @@ mod tests {
         );
         m.merge_gate = -1.0;
         assert!(m.merge(&z, &pos, &[true, true]).unwrap().is_none());
+    }
+
+    #[test]
+    fn merge_moves_take_the_last_run_of_copies() {
+        // 0–3 look at the origin for 40 frames; 4 and 5 look at a point 2.8 m away and,
+        // from frame 20, at the origin too, held in a source of their own all along: its
+        // fit slides after them and is a copy of the origin's only some frames after 20,
+        // and (by chance) in frame 3, so the copies' frames are not contiguous. The merge
+        // over the copies' whole span (from frame 3) takes 4 and 5 off their own target
+        // for 17 frames and is no merge; the merge over the last run of copies, given its
+        // extension, leaves one charge from frame 20 on.
+        let (n, cut, h) = (40, 20, 0.06);
+        let far = Vector3::new(2.8, 0.0, 0.0);
+        let eyes: Vec<Vector3<f64>> = (0..6)
+            .map(|i| {
+                let ang = std::f64::consts::TAU * i as f64 / 6.0 + 0.3;
+                Vector3::new(1.4 + 4.0 * ang.cos(), 4.0 * ang.sin(), 0.5)
+            })
+            .collect();
+        let frames: Vec<GazeRays> = (0..n)
+            .map(|t| {
+                let v = eyes
+                    .iter()
+                    .enumerate()
+                    .map(|(i, p)| {
+                        let x = if i >= 4 && t < cut {
+                            far
+                        } else {
+                            Vector3::zeros()
+                        };
+                        (x - p).normalize()
+                    })
+                    .collect();
+                GazeRays::new(eyes.clone(), v, vec![h; 6], None).unwrap()
+            })
+            .collect();
+        let opts = ModeOptions::default();
+        let mut m = model(&frames, &opts);
+        let z: Assign = vec![vec![Some(0), Some(0), Some(0), Some(0), Some(1), Some(1)]; n];
+        let mut pos: Positions = (0..2).map(|k| m.fit(&z, k, &vec![None; n])).collect();
+        pos[1][3] = pos[0][3];
+        let ok = |out: &Assign| {
+            out.iter().enumerate().all(|(t, zt)| {
+                zt[..4].iter().all(|&s| s == zt[0])
+                    && zt[4] == zt[5]
+                    && zt[4].is_some()
+                    && (zt[4] == zt[0]) == (t >= cut)
+            })
+        };
+        let (_, out, _, _) = m.merge(&z, &pos, &[true, true]).unwrap().expect("a merge");
+        assert!(ok(&out), "{out:?}");
+        m.merge_runs = false;
+        let out = m.merge(&z, &pos, &[true, true]).unwrap();
+        assert!(
+            out.map_or(true, |r| !ok(&r.1)),
+            "merged without the last run"
+        );
     }
 }
