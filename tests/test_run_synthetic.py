@@ -309,6 +309,41 @@ def test_a_pair_whose_eyes_stray_apart_keeps_its_charge():
         RunOptions(pair_bridge=-0.1)
 
 
+def test_a_track_is_carried_where_its_pair_has_no_charge():
+    # charge_continuation: a pair looks at one target for 0.3 s or more, then its eyes
+    # stray 3 h apart (no mode, no pair candidate, no mode after it to bridge to): the
+    # track's local-quadratic fit carries the charge on for 0.5 s, frame by frame, and no
+    # further; a track shorter than CONTINUE_MIN_TRACK (0.3 s) is not carried
+    from socialcam.charges import GazeRays
+    from socialcam.pipeline import _find_charges
+
+    h = 0.02
+    eyes = np.array([[0.0, 0.0, 1.6], [3.0, 0.0, 1.6], [0.0, 3.0, 1.6]])
+    target = np.array([1.5, 2.0, 1.4])
+    u = (target - eyes) / np.linalg.norm(target - eyes, axis=1, keepdims=True)
+
+    def frame(tilt):
+        look = u + np.outer([tilt, -tilt, 0.0], [0.0, 0.0, 1.0])
+        look[2] = [-1.0, 0.0, 0.0]  # wearer 2 looks at a wall
+        return GazeRays(eyes, look, h, normalize=True)
+
+    on, off = frame(0.0), frame(3.0 * h)
+    frames = [on] * 5 + [off] * 8
+    times = np.arange(len(frames)) / 10.0
+    carried = _find_charges(frames, times, RunOptions())
+    assert [len(cs) for cs in carried] == [1] * 10 + [0] * 3
+    for cs in carried[:10]:
+        assert sorted(cs[0].members.tolist()) == [0, 1]
+        assert np.linalg.norm(cs[0].position - target) < 0.05
+    # both ways in time, and only from established tracks
+    back = _find_charges(frames[::-1], times, RunOptions())
+    assert [len(cs) for cs in back] == [0] * 3 + [1] * 10
+    short = [on] * 3 + [off] * 3
+    assert [len(cs) for cs in _find_charges(short, times[:6], RunOptions())] == [1] * 3 + [0] * 3
+    off_stage = _find_charges(frames, times, RunOptions(charge_continuation=0.0))
+    assert [len(cs) for cs in off_stage] == [1] * 5 + [0] * 8
+
+
 def test_a_target_handed_on_as_a_wearers_poses_end_keeps_its_charge():
     # wearers 0 and 2 look at one target; wearer 2's poses end, and wearer 1, who turned
     # to the target just before, is its new partner until the clip ends: only the pair's
