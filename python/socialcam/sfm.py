@@ -773,30 +773,35 @@ def _neighbour_outliers(
     bad = np.zeros(n, bool)
     if n < 3:
         return bad
-    while True:
-        live = np.flatnonzero(~bad)
-        m = len(live)
-        if m < 3:
-            return bad
-        ratio = np.zeros(m)
-        for a in range(m):
-            i = live[a]
-            nb = [
-                live[b]
-                for b in (a - 1, a + 1)
-                if 0 <= b < m and abs(int(idx[live[b]]) - int(idx[i])) <= 2
-            ]
-            if not nb:
-                continue
-            c_ref = C[nb].mean(axis=0)
-            u, _, vt = np.linalg.svd(R[nb].sum(axis=0))
-            ang = np.arccos(np.clip((np.trace(R[i] @ (u @ vt).T) - 1) / 2, -1.0, 1.0))
-            k = 1.0 if len(nb) == 2 else 2.0
-            ratio[a] = max(np.linalg.norm(C[i] - c_ref) / (k * jump), ang / (k * turn))
+    live = list(range(n))
+
+    def excess(a: int) -> float:
+        """By what factor ``live[a]`` breaks its limits (≤ 1: it does not)."""
+        i = live[a]
+        nb = [
+            live[b]
+            for b in (a - 1, a + 1)
+            if 0 <= b < len(live) and abs(int(idx[live[b]]) - int(idx[i])) <= 2
+        ]
+        if not nb:
+            return 0.0
+        c_ref = C[nb].mean(axis=0)
+        u, _, vt = np.linalg.svd(R[nb].sum(axis=0))
+        ang = np.arccos(np.clip((np.trace(R[i] @ (u @ vt).T) - 1) / 2, -1.0, 1.0))
+        k = 1.0 if len(nb) == 2 else 2.0
+        return float(max(np.linalg.norm(C[i] - c_ref) / (k * jump), ang / (k * turn)))
+
+    ratio = [excess(a) for a in range(n)]
+    while len(live) >= 3:
         worst = int(np.argmax(ratio))
         if ratio[worst] <= 1.0:
-            return bad
-        bad[live[worst]] = True
+            break
+        bad[live.pop(worst)] = True
+        del ratio[worst]
+        for a in (worst - 1, worst):  # only its two neighbours' neighbours changed
+            if 0 <= a < len(live):
+                ratio[a] = excess(a)
+    return bad
 
 
 def _check_video_args(
