@@ -263,25 +263,34 @@ def test_a_crossing_of_one_frame_is_no_charge():
         RunOptions(charge_persistence=-1)
 
 
+#: three wearers 3 m apart, for the charge-stage tests below; wearers 0 and 1 look at
+#: ``PAIR_TARGET`` (``PAIR_LOOK``: the unit directions of all three towards it)
+PAIR_EYES = np.array([[0.0, 0.0, 1.6], [3.0, 0.0, 1.6], [0.0, 3.0, 1.6]])
+PAIR_TARGET = np.array([1.5, 2.0, 1.4])
+PAIR_LOOK = (PAIR_TARGET - PAIR_EYES) / np.linalg.norm(
+    PAIR_TARGET - PAIR_EYES, axis=1, keepdims=True
+)
+
+
+def _pair_frame(tilt, h=0.02):
+    """Wearers 0 and 1 look at ``PAIR_TARGET``, their eyes ``tilt`` off the head's primary
+    ray, one above and one below; wearer 2 looks at a wall."""
+    from socialcam.charges import GazeRays
+
+    look = PAIR_LOOK + np.outer([tilt, -tilt, 0.0], [0.0, 0.0, 1.0])
+    look[2] = [-1.0, 0.0, 0.0]
+    return GazeRays(PAIR_EYES, look, h, normalize=True)
+
+
 def test_a_pair_whose_eyes_stray_apart_keeps_its_charge():
     # pair_bridge: two wearers look at one target; for 0.2 s their eyes are 2.5 h off the
     # head's primary ray, one above, one below: the rays pass 5 h apart, the field has no
     # joint mode there, but the target is within 3 h of both (Sec 3.1's cone)
-    from socialcam.charges import GazeRays, find_charges
+    from socialcam.charges import find_charges
     from socialcam.pipeline import _find_charges
 
-    h = 0.02
-    eyes = np.array([[0.0, 0.0, 1.6], [3.0, 0.0, 1.6], [0.0, 3.0, 1.6]])
-    target = np.array([1.5, 2.0, 1.4])
-    u = (target - eyes) / np.linalg.norm(target - eyes, axis=1, keepdims=True)
-    wall = np.array([-1.0, 0.0, 0.0])  # wearer 2 looks at a wall
-
-    def frame(tilt):
-        look = u + np.outer([tilt, -tilt, 0.0], [0.0, 0.0, 1.0])
-        look[2] = wall
-        return GazeRays(eyes, look, h, normalize=True)
-
-    on, off = frame(0.0), frame(2.5 * h)
+    h, target = 0.02, PAIR_TARGET
+    on, off = _pair_frame(0.0), _pair_frame(2.5 * h)
     assert find_charges(off, member_sigma=3.0, membership="all") == []
     frames = [on, on, on, off, off, on, on, on]
     times = np.arange(len(frames)) / 10.0
@@ -314,20 +323,10 @@ def test_a_track_is_carried_where_its_pair_has_no_charge():
     # stray 3 h apart (no mode, no pair candidate, no mode after it to bridge to): the
     # track's local-quadratic fit carries the charge on for 0.5 s, frame by frame, and no
     # further; a track shorter than CONTINUE_MIN_TRACK (0.3 s) is not carried
-    from socialcam.charges import GazeRays
     from socialcam.pipeline import _find_charges
 
-    h = 0.02
-    eyes = np.array([[0.0, 0.0, 1.6], [3.0, 0.0, 1.6], [0.0, 3.0, 1.6]])
-    target = np.array([1.5, 2.0, 1.4])
-    u = (target - eyes) / np.linalg.norm(target - eyes, axis=1, keepdims=True)
-
-    def frame(tilt):
-        look = u + np.outer([tilt, -tilt, 0.0], [0.0, 0.0, 1.0])
-        look[2] = [-1.0, 0.0, 0.0]  # wearer 2 looks at a wall
-        return GazeRays(eyes, look, h, normalize=True)
-
-    on, off = frame(0.0), frame(3.0 * h)
+    h, target = 0.02, PAIR_TARGET
+    on, off = _pair_frame(0.0), _pair_frame(3.0 * h)
     frames = [on] * 5 + [off] * 8
     times = np.arange(len(frames)) / 10.0
     carried = _find_charges(frames, times, RunOptions())
@@ -352,14 +351,11 @@ def test_a_target_handed_on_as_a_wearers_poses_end_keeps_its_charge():
     from socialcam.charges import GazeRays
     from socialcam.pipeline import _find_charges
 
-    h = 0.02
-    eyes = np.array([[0.0, 0.0, 1.6], [3.0, 0.0, 1.6], [0.0, 3.0, 1.6]])
-    target = np.array([1.5, 2.0, 1.4])
-    u = (target - eyes) / np.linalg.norm(target - eyes, axis=1, keepdims=True)
+    h, eyes, target, u = 0.02, PAIR_EYES, PAIR_TARGET, PAIR_LOOK
     wall = np.array([1.0, -1.0, 0.0])  # wearer 1 looks at a wall first
     watched = GazeRays(eyes, np.array([u[0], wall, u[2]]), h, normalize=True)
-    look = u[:2] + np.outer([2.5 * h, -2.5 * h], [0.0, 0.0, 1.0])
-    handed = GazeRays(eyes[:2], look, h, normalize=True)
+    stray = _pair_frame(2.5 * h, h)
+    handed = GazeRays(eyes[:2], stray.v[:2], h)
     frames = [watched] * 6 + [handed] * 3
     times = np.arange(len(frames)) / 10.0
     kept = _find_charges(frames, times, RunOptions())
