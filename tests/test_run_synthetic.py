@@ -133,6 +133,7 @@ def test_charge_stage_options_leave_the_gaze_frames_unchanged():
         "pair_bridge": 0.0,
         "charge_pooling": 0.0,
         "charge_continuation": 0.0,
+        "charge_faces": False,
     }
     assert set(changed) == set(CHARGE_STAGE_OPTIONS)
     for field, value in changed.items():
@@ -412,6 +413,38 @@ def test_a_shallow_crossing_is_placed_by_the_rays_of_neighbouring_times():
     assert pooled[2:4].max() < 0.1
     with pytest.raises(ValueError, match="charge_pooling"):
         RunOptions(charge_pooling=-1)
+
+
+def test_a_charge_at_another_wearers_face_is_put_at_that_face():
+    # charge_faces: wearers 0 and 1, 0.8 m apart, look at wearer 2's face 4 m away (the
+    # rays cross at ~11 deg), their eyes 1.5-2.5 h off it on opposite sides (Sec 3.1):
+    # the rays still meet, 0.9-1.3 m along the line, in every frame, and the track fit
+    # cannot move it. Every member's ray passes within member_sigma of wearer 2's eye
+    # (the origin of its ray, looking away): the charge is put there
+    from socialcam.charges import GazeRays
+    from socialcam.pipeline import _find_charges
+
+    h = 0.02
+    eyes = np.array([[0.0, 0.0, 1.6], [0.8, 0.0, 1.6], [0.4, 4.0, 1.6]])
+    face = eyes[2]
+    u = (face - eyes[:2]) / np.linalg.norm(face - eyes[:2], axis=1, keepdims=True)
+    side = np.cross(u, [0.0, 0.0, 1.0])
+    times = np.arange(9) / 10.0
+
+    def errors(off, **options):
+        look = np.vstack([u + np.array([[1.0], [-1.0]]) * off * h * side, [0.0, 1.0, 0.0]])
+        frames = [GazeRays(eyes, look, h, normalize=True)] * len(times)
+        charges = _find_charges(frames, times, RunOptions(**options))
+        assert all(len(cs) == 1 and cs[0].members.tolist() == [0, 1] for cs in charges)
+        return np.array([np.linalg.norm(cs[0].position - face) for cs in charges])
+
+    for off in (1.5, 2.5):
+        assert errors(off, charge_faces=False).min() > 0.9
+        assert errors(off).max() < 1e-9
+    # a face the rays pass beyond member_sigma (3 h) of does not hold the charge
+    assert errors(3.5).min() > 1.0
+    with pytest.raises(ValueError, match="charge_faces"):
+        RunOptions(charge_faces=1)
 
 
 def _facing_frames(targets, eyes, h, off):
