@@ -41,6 +41,11 @@ Final11 (session 11, defined before it was run): every clip at 24 Hz (every fift
 2.5 s windows) from frames 2 and 40.
 Final12 (session 12, defined before it was run): every clip at 60 Hz on the odd source
 frames from frames 15 and 105, and 85_02 also from frames 215, 455 and 675.
+Lowrate (session 18, chosen on): every clip at 24 Hz from frames 23 and 61, at 30 Hz from
+frame 27 and at 40 Hz from frame 50. Final18 (session 18, defined before it was run):
+every clip at 20 Hz from frames 7 and 57 where 60 frames fit (85_02), 85_02 also from
+frames 307 and 447, every clip at 24 Hz from frame 4 and at 30 Hz from frame 2.
+"robust-rk16" is session 17's method (refine_k_max=16; session 18 raised the default to 32).
 --skeleton adds the whole-skeleton reading of Fig 4.3 (run_skeleton): only the root of each
 joint's chain is given 5 % off and every joint is reconstructed from its parent's
 reconstruction, the error taken on the reconstructed bone. The thesis defines the root error
@@ -281,14 +286,34 @@ METHOD_OPTIONS: dict[str, dict] = {
     "robust-k8": {"method": "robust", "refine_k_max": 0},
     "robust-s7": {"method": "robust", "average_starts": False},
     "robust": {"method": "robust"},
+    "robust-rk16": {"method": "robust", "refine_k_max": 16},
     "robust-lw20": {"method": "robust", "length_weight": 20.0},
     "robust-avg": {"method": "robust", "average_starts": True},
     "robust-avg-lw20": {"method": "robust", "average_starts": True, "length_weight": 20.0},
 }
 # Methods given the joint's pixels only; the others also get its children's pixels.
 WITHOUT_CHILDREN = ("thesis", "robust-mincost", "robust-smooth", "robust-k8", "robust-s7")
-FULL_ONLY = ("robust-mincost", "robust-smooth", "robust-k8", "robust-s7", "robust-avg-lw20")
-PARTS = ("dev", "held-out", "new", "fresh", "unseen", "unseen8", "final9", "final11", "final12")
+FULL_ONLY = (
+    "robust-mincost",
+    "robust-smooth",
+    "robust-k8",
+    "robust-s7",
+    "robust-avg-lw20",
+    "robust-rk16",
+)
+PARTS = (
+    "dev",
+    "held-out",
+    "new",
+    "fresh",
+    "lowrate",
+    "unseen",
+    "unseen8",
+    "final9",
+    "final11",
+    "final12",
+    "final18",
+)
 # Session 8's never-seen cuts: every clip sampled at 40 Hz (every third frame) from
 # frames 10 and 100, 60 frames each (the other parts sample every second frame).
 UNSEEN8_STEP, UNSEEN8_OFFSETS = 3, (10, 100)
@@ -303,6 +328,17 @@ FINAL11_STEP, FINAL11_OFFSETS = 5, (2, 40)
 # source frames (the other 60 Hz parts use the even ones) from frames 15 and 105, and 85_02
 # also from frames 215, 455 and 675.
 FINAL12_OFFSETS, FINAL12_C3D_OFFSETS = (15, 105), (215, 455, 675)
+# Session 18's choice cuts at the rates where the 60-frame windows span 2-2.5 s (chosen on,
+# like dev / held-out / new / fresh): every clip at 24 Hz (every fifth frame) from frames 23
+# and 61, at 30 Hz (every fourth frame) from frame 27 and at 40 Hz (every third) from frame
+# 50 (sample phases no other part uses).
+LOWRATE_CUTS = ((5, 23), (5, 61), (4, 27), (3, 50))
+# Session 18's never-seen cuts (defined before they were run, run once at the end): every
+# clip long enough at 20 Hz (every sixth frame; 60 frames = 3 s) from frames 7 and 57 (only
+# 85_02: the BVH clips have 150-300 frames), 85_02 also from frames 307 and 447, and every
+# clip at 24 Hz from frame 4 and at 30 Hz from frame 2 (sample phases no other part uses).
+FINAL18_CUTS = ((6, 7), (6, 57), (5, 4), (4, 2))
+FINAL18_C3D_CUTS = ((6, 307), (6, 447))
 
 
 def load_clips() -> dict[str, tuple[np.ndarray, list[tuple[int, int]]]]:
@@ -376,6 +412,19 @@ def all_windows(
         if P[off::2].shape[0] >= 60
     ]
     wins += [("final12", win("85_02", P85, pairs85, 2, off)) for off in FINAL12_C3D_OFFSETS]
+    wins += [
+        ("lowrate", win(name, P, pairs, step, off))
+        for name, (P, pairs) in clips.items()
+        for step, off in LOWRATE_CUTS
+        if P[off::step].shape[0] >= 60
+    ]
+    wins += [
+        ("final18", win(name, P, pairs, step, off))
+        for name, (P, pairs) in clips.items()
+        for step, off in FINAL18_CUTS
+        if P[off::step].shape[0] >= 60
+    ]
+    wins += [("final18", win("85_02", P85, pairs85, s, off)) for s, off in FINAL18_C3D_CUTS]
     return wins
 
 

@@ -302,7 +302,8 @@ class ArticulatedOptions:
         start is refined again with ``k + 1, …, refine_k_max`` vectors per angle and the
         size with the lowest Bayesian information criterion on the reprojection error is
         kept (sizes above half the observed frames are not tried). ``≤ k`` keeps ``k``
-        (session 6's method). The result's coefficients have the kept size.
+        (session 6's method). The result's coefficients have the kept size. The default
+        32 (16 until session 17) lets windows spanning 2-3 s of walking grow past 16.
     child_slack : robust method, when the joint's children are given (``children`` of
         :func:`reconstruct_articulated`; :func:`reconstruct_skeleton` always gives them):
         each child must lie on its own viewing ray within ``(1 + child_slack)`` times its
@@ -348,7 +349,7 @@ class ArticulatedOptions:
     flip_rounds: int = 3
     smooth_weight: float = 1.0
     motion_weight: float = 2.0
-    refine_k_max: int = 16
+    refine_k_max: int = 32
     child_slack: float = 0.1
     length_weight: float = 0.0
     average_starts: bool = False
