@@ -226,3 +226,10 @@ def test_run_poses_at_its_output_rate(tmp_path, monkeypatch):
     assert seen["options"].keyframe_overlap == 0.4 < VideoSfmOptions().keyframe_overlap
     with pytest.raises(ValueError, match="keyframe_overlap"):
         pipeline.RunOptions(keyframe_overlap=1.5)
+    # the SfM threads are passed on too (1: repeatable poses, tests/test_run.py)
+    assert seen["options"].num_threads == pipeline.RunOptions().num_threads == 2
+    with pytest.raises(ValueError, match="stop here"):
+        pipeline.run([video], tmp_path / "out1", num_threads=1, progress=False)
+    assert seen["options"].num_threads == 1
+    with pytest.raises(ValueError, match="num_threads"):
+        pipeline.RunOptions(num_threads=0)

@@ -90,6 +90,13 @@ def main(argv: Sequence[str] | None = None) -> int:
         "without one the wearer's gaze is the optical axis",
     )
     _sfm_flags(rn)
+    rn.add_argument(
+        "--num-threads",
+        type=int,
+        default=None,
+        help="threads for SIFT, matching and mapping (default: 2; 1 gives bit-identical "
+        "poses, and so the same run, from run to run)",
+    )
     rn.add_argument("--default-h", type=float, default=None, help="h without calibration")
     rn.add_argument(
         "--max-h", type=float, default=None, help="h above which a wearer did not fixate"
@@ -343,6 +350,7 @@ def _run(parser: argparse.ArgumentParser, args: argparse.Namespace) -> int:
             keyframe_fps="keyframe_fps",
             camera_model="camera_model",
             seed="seed",
+            num_threads="num_threads",
             default_h="default_h",
             max_h="max_h",
             member_sigma="member_sigma",

@@ -233,6 +233,11 @@ class RunOptions:
         time; at 0.4 the run's calibration and joint attention stayed the same (seed 2: v
         within 0.01°, p within 0.1 cm) and issue 9's pose targets held on seeds 5-7 (worst
         centre 45 mm against 10 cm; median ≤ 1 mm).
+    num_threads : threads for SIFT, matching and mapping (as
+        :class:`socialcam.sfm.VideoSfmOptions`). COLMAP's results depend on thread
+        scheduling: with 1 the same videos give bit-identical poses (and so the same run);
+        with 2 the same videos have given 11/22 to 20/22 joint-attention frames found on
+        the uncalibrated test scene of ``tests/test_run.py``.
     default_h : eye-in-head spread assumed for a wearer without a usable calibration
     max_h : a calibration whose residual spread ``h`` exceeds this (radians) means the
         wearer did not fixate: warn and fall back to the optical axis
@@ -408,6 +413,7 @@ class RunOptions:
     keyframe_overlap: float = 0.4
     camera_model: str = "SIMPLE_RADIAL"
     seed: int = 0
+    num_threads: int = 2
     default_h: float = DEFAULT_H
     max_h: float = 0.15
     max_axis_angle: float = 0.5236  # 30°
@@ -442,6 +448,7 @@ class RunOptions:
                 f"camera_model: expected a COLMAP model name, got {self.camera_model!r}"
             )
         check_seed(self.seed)
+        check_int(self.num_threads, "num_threads", min=1, max=1024)
         check_float(self.default_h, "default_h", min=0.0, min_exclusive=True)
         check_float(self.max_h, "max_h", min=0.0, min_exclusive=True)
         check_float(self.max_axis_angle, "max_axis_angle", min=0.0, max=np.pi)
@@ -1072,6 +1079,7 @@ def run(
                 "keyframe_overlap": opts.keyframe_overlap,
                 "camera_model": opts.camera_model,
                 "seed": opts.seed,
+                "num_threads": opts.num_threads,
             },
         )
         key = _poses_key(videos, sfm_opts, sync, intrinsics, known_distance, eye_height)
