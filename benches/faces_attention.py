@@ -25,7 +25,11 @@ head direction averaged over that hold, turned by ``hold_error=`` degrees (defau
 random direction per hold (seeded): what a perfect hold/turn smoother of the head direction
 could reach); or ``landmarks=facemesh``: the scene rendered at 1280×960 and the same
 detections' landmarks measured by FaceMesh on its frames (``refine_landmarks``) in place of
-the truth + 3 % noise (≈ 2.5 min per seed instead of 10 s)
+the truth + 3 % noise (≈ 2.5 min per seed instead of 10 s; reconstructed with FaceMesh's
+noise, ``LANDMARK_NOISE``); or ``landmarks=mtcnn``: the same with MTCNN's landmarks
+(``detect_faces``' networks at the frames' resolution, on a crop of 2.2x each box; a face
+it misses keeps truth + 3 %): the honest "before". Both keep the render and the measured
+landmarks in OUT_DIR/circle<seed>_1280 and reuse them on the next run
 """
 
 from __future__ import annotations
@@ -39,20 +43,37 @@ import numpy as np
 
 from socialcam.faces import reconstruct_faces, refine_landmarks
 from socialcam.synth.evaluate import face_joint_attention, faces_vs_truth, truth_detections
-from socialcam.synth.render import render_scene
+from socialcam.synth.render import load_truth, render_scene
 
 
 def evaluate(out: Path, seed: int, **options: object) -> tuple[float, ...]:
-    mesh = options.pop("landmarks", "") == "facemesh"
-    size, scale = ((1280, 960), 1.0) if mesh else ((320, 240), 4.0)
-    scene = render_scene(out / f"circle{seed}{'_1280' if mesh else ''}", n_wearers=6, n_people=3,
-                         duration=10.0, fps=10.0, size=size, seed=seed, faces=True,
-                         arrangement="circle", audio=False, calibration=False,
-                         start_spread=0.0, progress=False)  # fmt: skip
-    truth = scene.truth
+    source = str(options.pop("landmarks", ""))
+    if source not in ("", "facemesh", "mtcnn"):
+        raise ValueError(f"landmarks: facemesh or mtcnn, not {source!r}")
+    size, scale = ((1280, 960), 1.0) if source else ((320, 240), 4.0)
+    folder = out / f"circle{seed}{'_1280' if source else ''}"
+    cache = folder / f"{source}_landmarks.npz"
+    videos = [folder / f"wearer{v}.mp4" for v in range(6)]
+    if source and (folder / "truth.npz").exists() and all(p.exists() for p in videos):
+        truth = load_truth(folder)  # a previous run's render
+    else:
+        scene = render_scene(folder, n_wearers=6, n_people=3, duration=10.0, fps=10.0,
+                             size=size, seed=seed, faces=True, arrangement="circle",
+                             audio=False, calibration=False, start_spread=0.0,
+                             progress=False)  # fmt: skip
+        truth, videos = scene.truth, list(scene.videos)
     dets, cams = truth_detections(truth, scale=scale, seed=seed)
-    if mesh:  # the same detections (boxes), landmarks measured by FaceMesh on the frames
-        dets = [refine_landmarks(scene.videos[v], d) for v, d in enumerate(dets)]
+    if source:  # the same detections (boxes), landmarks measured on the frames
+        if not cache.exists():
+            measure = refine_landmarks if source == "facemesh" else mtcnn_landmarks
+            got = [measure(videos[v], d) for v, d in enumerate(dets)]
+            np.savez(cache, **{f"v{v}": d.landmarks for v, d in enumerate(got)},
+                     **{f"n{v}": d.landmark_noise for v, d in enumerate(got)
+                        if d.landmark_noise is not None})  # fmt: skip
+        z = np.load(cache)
+        dets = [dataclasses.replace(d, landmarks=z[f"v{v}"], landmark_source=source,
+                                    landmark_noise=z[f"n{v}"] if f"n{v}" in z else None)
+                for v, d in enumerate(dets)]  # fmt: skip
     oracle = str(options.pop("oracle", ""))
     hold_error = float(cast(float, options.pop("hold_error", 0.0)))
     f3 = reconstruct_faces(dets, cams, **options)
@@ -71,6 +92,39 @@ def evaluate(out: Path, seed: int, **options: object) -> tuple[float, ...]:
 
 
 POOL: list[tuple[np.ndarray, np.ndarray]] = []
+
+
+def mtcnn_landmarks(video: Path, dets: Any) -> Any:
+    """``dets`` with the landmarks MTCNN (``detect_faces``' networks, at the frames' own
+    resolution, its scale pyramid down to half the box) finds in a crop of 2.2x each box; a
+    face it misses keeps its landmarks."""
+    import dataclasses as dc
+
+    from socialcam.faces import _detector, _frames_of, _mtcnn
+
+    det = _detector(12.0)
+    lm = np.array(dets.landmarks, dtype=np.float64, copy=True)
+    images, _ = _frames_of(video)
+    missed = 0
+    for k, img in enumerate(images):
+        H, W = img.shape[:2]
+        for i in dets.in_frame(k):
+            b = dets.box[i]
+            side = max(b[2], b[3])
+            cx, cy = b[0] + b[2] / 2, b[1] + b[3] / 2
+            x0, y0 = max(0, int(cx - 1.1 * side)), max(0, int(cy - 1.1 * side))
+            x1, y1 = min(W, int(cx + 1.1 * side) + 1), min(H, int(cy + 1.1 * side) + 1)
+            det.min_face_size = max(12, round(0.5 * side))  # the pyramid down to half the box
+            _, found = _mtcnn(det, np.ascontiguousarray(img[y0:y1, x0:x1]))
+            if len(found):
+                found = found + np.array([x0, y0])
+                j = np.linalg.norm(found.mean(1) - lm[i].mean(0), axis=1).argmin()
+                if np.linalg.norm(found[j] - lm[i], axis=1).mean() <= 0.25 * side:
+                    lm[i] = found[j]
+                    continue
+            missed += 1
+    print(f"# {video.name}: MTCNN missed {missed} of {len(dets)} faces", file=sys.stderr)
+    return dc.replace(dets, landmarks=lm)
 
 
 def with_true_rays(

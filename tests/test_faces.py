@@ -4,6 +4,8 @@ temporal refinement (Eq 3.4) and gaze rays, against simulator truth."""
 
 from __future__ import annotations
 
+import dataclasses
+
 import numpy as np
 import pytest
 
@@ -234,9 +236,20 @@ def test_facemesh_landmarks_scatter_less_than_mtcnn():
             planes.append(pl)
         d = detect_faces(np.stack(frames))
         refined = refine_landmarks(np.stack(frames), d)
+        assert (d.landmark_source, refined.landmark_source) == ("mtcnn", "facemesh")
+        assert d.landmark_noise is None
+        np.testing.assert_array_equal(refined.landmark_noise, 0.01)  # all found by FaceMesh
         if p == 0:  # the same, found and refined in one pass
             both = detect_faces(np.stack(frames), landmarks="facemesh")
             np.testing.assert_allclose(both.landmarks, refined.landmarks, atol=1e-6)
+            assert both.landmark_source == "facemesh"
+            np.testing.assert_array_equal(both.landmark_noise, refined.landmark_noise)
+            # a box where FaceMesh finds no face keeps the detector's landmarks and noise
+            blank = np.full((1, 480, 640, 3), 128, np.uint8)
+            one = d.select([0])
+            kept = refine_landmarks(blank, one)
+            np.testing.assert_array_equal(kept.landmarks, one.landmarks)
+            np.testing.assert_array_equal(kept.landmark_noise, 0.03)
         scatter = []
         for det in (d, refined):
             assert (det.frame == np.arange(len(frames))).all()
@@ -365,6 +378,39 @@ def test_reconstruction_from_landmarks_meets_the_targets():
     assert np.median(cover) >= 0.95, cover
     assert np.median(err) < 0.01 and err.max() < 0.015, err
     assert np.median(gerr) < 6.0, gerr
+
+
+def test_landmark_noise_follows_the_landmark_source():
+    """``FaceOptions.landmark_noise = None`` (default) weights each camera's landmarks by
+    the measured noise of what found them (``LANDMARK_NOISE``: MTCNN 0.03, FaceMesh 0.01
+    of the face size); an explicit value overrides it for every camera."""
+    w = _World(0, T=8, noise=0.3)
+    mesh = [dataclasses.replace(d, landmark_source="facemesh") for d in w.dets]
+    assert w.dets[0].landmark_source == "mtcnn"
+    assert mesh[0].select(np.arange(4)).landmark_source == "facemesh"
+    f_mesh = reconstruct_faces(mesh, w.cams, anchors=False)
+    f_001 = reconstruct_faces(w.dets, w.cams, anchors=False, landmark_noise=0.01)
+    f_mtcnn = reconstruct_faces(w.dets, w.cams, anchors=False)
+    f_003 = reconstruct_faces(mesh, w.cams, anchors=False, landmark_noise=0.03)
+    for a, b in ((f_mesh, f_001), (f_mtcnn, f_003)):
+        np.testing.assert_allclose(a.v, b.v, equal_nan=True)
+        np.testing.assert_allclose(a.h, b.h, equal_nan=True)
+    ok = np.isfinite(f_mesh.h) & np.isfinite(f_mtcnn.h)
+    assert (f_mesh.h[ok] < f_mtcnn.h[ok]).mean() > 0.9  # the smaller noise, the narrower rays
+    # per detection (refine_landmarks: the detector's noise where FaceMesh found no face)
+    per = [dataclasses.replace(d, landmark_noise=np.full(len(d), 0.01)) for d in w.dets]
+    np.testing.assert_allclose(reconstruct_faces(per, w.cams, anchors=False).h, f_001.h)
+    first = per[0].select(np.arange(4))
+    assert first.landmark_noise.shape == (int((w.dets[0].frame < 4).sum()),)
+    mixed = [dataclasses.replace(d, landmark_noise=np.where(np.arange(len(d)) % 2, 0.03, 0.01))
+             for d in w.dets]  # fmt: skip
+    f_mixed = reconstruct_faces(mixed, w.cams, anchors=False)
+    assert not np.allclose(f_mixed.h, f_001.h, equal_nan=True)
+    assert not np.allclose(f_mixed.h, f_mtcnn.h, equal_nan=True)
+    bad = [dataclasses.replace(d, landmark_source="openface") for d in w.dets]
+    with pytest.raises(ValueError, match="landmark_source"):
+        reconstruct_faces(bad, w.cams)
+    reconstruct_faces(bad, w.cams, landmark_noise=0.02)  # an explicit noise needs no source
 
 
 def test_gaze_rays_and_h():

