@@ -133,6 +133,20 @@ def find_charges(
     (C,3)``, ``region_axes (C,3,3)``, ``region_radii (C,3)``. ``ids (T,)`` person ids of
     the rays (default: the row within the frame) follow people across frames."""
 
+def diagnose_window(
+    p: _F64,
+    v: _F64,
+    h: _F64,
+    offsets: npt.NDArray[np.int64],
+    seed: int,
+    options: ChargeOptions,
+    truth: npt.NDArray[np.int64],
+    ids: npt.NDArray[np.int64] | None = None,
+) -> tuple[float, float, float]:
+    """The joint window's objective of the assignment ``find_charges`` finds on the frames
+    ``offsets``, of the true groups ``truth (T,)`` (each ray's group, -1 for none) with
+    their positions fitted, and of the search started from them (a bench's debug path)."""
+
 def track_charges(
     features: _F64,
     frames: npt.NDArray[np.int64],

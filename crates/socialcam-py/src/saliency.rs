@@ -179,32 +179,18 @@ impl PyChargeOptions {
     }
 }
 
-/// Mode seeking on every frame (Eq 6.5–6.8) with the options of a
-/// `socialcam.ChargeOptions`. Returns, over all charges `C`: `frame (C,)`,
-/// `position (C,3)`, `magnitude (C,)`, `support (C,)`, `members` (flat ray indices within
-/// the frame) with `member_offsets (C+1,)`, `membership` (flat, `N_f` values per charge),
-/// `region_centre (C,3)`, `region_axes (C,3,3)` (columns are the axes), `region_radii (C,3)`.
-/// `ids (T,)`: person ids of the rays (default: the row within the frame), which follow
-/// people across frames.
-#[pyfunction]
-#[pyo3(signature = (p, v, h, offsets, seed, options, ids=None))]
-#[allow(clippy::too_many_arguments)]
-fn find_charges<'py>(
-    py: Python<'py>,
-    p: PyReadonlyArray2<'py, f64>,
-    v: PyReadonlyArray2<'py, f64>,
-    h: PyReadonlyArray1<'py, f64>,
-    offsets: PyReadonlyArray1<'py, i64>,
-    seed: u64,
-    options: Bound<'py, PyAny>,
-    ids: Option<PyReadonlyArray1<'py, i64>>,
-) -> PyResult<ChargeArrays<'py>> {
-    let options: PyChargeOptions = crate::convert::options(&options, "ChargeOptions")?;
-    let opts = options.to_core()?;
-    map(opts.validate())?;
-    let (pf, n) = rows(&p, "p", 3)?;
-    let (vf, nv) = rows(&v, "v", 3)?;
-    let hf = vec1(&h);
+/// The validated frames of stacked rays `p (T,3)`, `v (T,3)`, `h (T,)` split by `offsets
+/// (F+1,)`, with person `ids (T,)`.
+fn sequence_frames(
+    p: &PyReadonlyArray2<'_, f64>,
+    v: &PyReadonlyArray2<'_, f64>,
+    h: &PyReadonlyArray1<'_, f64>,
+    offsets: &PyReadonlyArray1<'_, i64>,
+    ids: Option<PyReadonlyArray1<'_, i64>>,
+) -> PyResult<Vec<GazeRays>> {
+    let (pf, n) = rows(p, "p", 3)?;
+    let (vf, nv) = rows(v, "v", 3)?;
+    let hf = vec1(h);
     if nv != n || hf.len() != n {
         return Err(PyValueError::new_err(format!(
             "p, v, h: need the same number of rays, got {n}, {nv}, {}",
@@ -244,6 +230,33 @@ fn find_charges<'py>(
             })
             .collect::<socialcore::Result<_>>()
             .map_err(|e| PyErr::from(crate::errors::PyCoreError(e)))?;
+    Ok(frames)
+}
+
+/// Mode seeking on every frame (Eq 6.5–6.8) with the options of a
+/// `socialcam.ChargeOptions`. Returns, over all charges `C`: `frame (C,)`,
+/// `position (C,3)`, `magnitude (C,)`, `support (C,)`, `members` (flat ray indices within
+/// the frame) with `member_offsets (C+1,)`, `membership` (flat, `N_f` values per charge),
+/// `region_centre (C,3)`, `region_axes (C,3,3)` (columns are the axes), `region_radii (C,3)`.
+/// `ids (T,)`: person ids of the rays (default: the row within the frame), which follow
+/// people across frames.
+#[pyfunction]
+#[pyo3(signature = (p, v, h, offsets, seed, options, ids=None))]
+#[allow(clippy::too_many_arguments)]
+fn find_charges<'py>(
+    py: Python<'py>,
+    p: PyReadonlyArray2<'py, f64>,
+    v: PyReadonlyArray2<'py, f64>,
+    h: PyReadonlyArray1<'py, f64>,
+    offsets: PyReadonlyArray1<'py, i64>,
+    seed: u64,
+    options: Bound<'py, PyAny>,
+    ids: Option<PyReadonlyArray1<'py, i64>>,
+) -> PyResult<ChargeArrays<'py>> {
+    let options: PyChargeOptions = crate::convert::options(&options, "ChargeOptions")?;
+    let opts = options.to_core()?;
+    map(opts.validate())?;
+    let frames = sequence_frames(&p, &v, &h, &offsets, ids)?;
     let per_frame: Vec<Vec<Charge>> = detach(py, || {
         if frames.len() == 1 {
             Ok(vec![sal::find_charges(&frames[0], &opts, seed)?])
@@ -294,6 +307,48 @@ fn find_charges<'py>(
         axes.into_pyarray(py),
         radii.into_pyarray(py),
     ))
+}
+
+/// The joint window's objective (see `socialcore::saliency::diagnose_window`) of the
+/// assignment `find_charges` finds on a sequence, of the true groups `truth (T,)` (each
+/// ray's group, −1 for none) with their positions fitted, and of the search started from
+/// them → `(found, truth, searched)`. A bench's debug path (`benches/charges_diagnose.py`).
+#[pyfunction]
+#[pyo3(signature = (p, v, h, offsets, seed, options, truth, ids=None))]
+#[allow(clippy::too_many_arguments)]
+fn diagnose_window<'py>(
+    py: Python<'py>,
+    p: PyReadonlyArray2<'py, f64>,
+    v: PyReadonlyArray2<'py, f64>,
+    h: PyReadonlyArray1<'py, f64>,
+    offsets: PyReadonlyArray1<'py, i64>,
+    seed: u64,
+    options: Bound<'py, PyAny>,
+    truth: PyReadonlyArray1<'py, i64>,
+    ids: Option<PyReadonlyArray1<'py, i64>>,
+) -> PyResult<(f64, f64, f64)> {
+    let options: PyChargeOptions = crate::convert::options(&options, "ChargeOptions")?;
+    let opts = options.to_core()?;
+    let frames = sequence_frames(&p, &v, &h, &offsets, ids)?;
+    let flat: Vec<i64> = truth.as_array().iter().copied().collect();
+    let n: usize = frames.iter().map(GazeRays::len).sum();
+    if flat.len() != n {
+        return Err(PyValueError::new_err(format!(
+            "truth: need one group per ray ({n}), got {}",
+            flat.len()
+        )));
+    }
+    let mut rest = flat.as_slice();
+    let truth: Vec<Vec<Option<usize>>> = frames
+        .iter()
+        .map(|r| {
+            let (now, after) = rest.split_at(r.len());
+            rest = after;
+            now.iter().map(|&g| usize::try_from(g).ok()).collect()
+        })
+        .collect();
+    let [a, b, c] = detach(py, || sal::diagnose_window(&frames, &opts, seed, &truth))?;
+    Ok((a, b, c))
 }
 
 /// Classic mean-shift tracking of membership features `(n, J)` with frames `(n,)`
@@ -347,5 +402,6 @@ pub fn register(m: &Bound<'_, PyModule>) -> PyResult<()> {
     m.add_function(wrap_pyfunction!(saliency_grid, m)?)?;
     m.add_function(wrap_pyfunction!(find_charges, m)?)?;
     m.add_function(wrap_pyfunction!(track_charges, m)?)?;
+    m.add_function(wrap_pyfunction!(diagnose_window, m)?)?;
     Ok(())
 }

@@ -36,7 +36,10 @@ pub mod tracking;
 mod window;
 
 pub use field::{ray_density, ray_hessian, saliency, saliency_at, saliency_grid, Grid};
-pub use modes::{find_charges, find_charges_sequence, Charge, Ellipsoid, Membership, ModeOptions};
+pub use modes::{
+    diagnose_window, find_charges, find_charges_sequence, Charge, Ellipsoid, Membership,
+    ModeOptions,
+};
 pub use tracking::{track_charges, TrackOptions, Tracking};
 
 use crate::error::{ensure_finite, Error, Result};

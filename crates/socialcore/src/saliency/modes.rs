@@ -1008,16 +1008,17 @@ pub fn find_charges(rays: &GazeRays, opts: &ModeOptions, seed: u64) -> Result<Ve
     charges_of_frame(rays, opts, seed, true, &Prior::default())
 }
 
-/// [`find_charges`] on every frame of a sequence, parallel over frames. With
-/// [`Membership::Partition`] and [`ModeOptions::pool_frames`] > 0, a second pass pools
-/// the first pass's charges of the neighbouring frames into each frame's position prior
-/// (see [`ModeOptions::pool_frames`]); otherwise frame `t` gives exactly what
-/// `find_charges(&frames[t], opts, seed)` gives.
-pub fn find_charges_sequence(
+/// The charges of every frame of a sequence.
+type PerFrame = Vec<Vec<Charge>>;
+
+/// The first pass and, with [`Membership::Partition`] and [`ModeOptions::pool_frames`] > 0,
+/// the pooled second pass of [`find_charges_sequence`]; `Err(first)` when there is no
+/// second pass (its frames are the result).
+fn pooled_passes(
     frames: &[GazeRays],
     opts: &ModeOptions,
     seed: u64,
-) -> Result<Vec<Vec<Charge>>> {
+) -> Result<std::result::Result<PerFrame, PerFrame>> {
     opts.validate()?;
     let widest = frames.iter().map(GazeRays::len).max().unwrap_or(0);
     // Frames run in parallel: each worker holds one frame's seeds at a time.
@@ -1028,7 +1029,7 @@ pub fn find_charges_sequence(
         .map(|rays| charges_of_frame(rays, opts, seed, false, &alone))
         .collect::<Result<_>>()?;
     if opts.pool_frames == 0 || opts.membership != Membership::Partition {
-        return Ok(first);
+        return Ok(Err(first));
     }
     // Each first-pass charge as (position, covariance of its position).
     let found: Vec<Vec<(Vector3<f64>, Matrix3<f64>)>> = first
@@ -1051,14 +1052,27 @@ pub fn find_charges_sequence(
             charges_of_frame(rays, opts, seed, false, &prior)
         })
         .collect::<Result<_>>()?;
+    Ok(Ok(pooled))
+}
+
+/// [`find_charges`] on every frame of a sequence, parallel over frames. With
+/// [`Membership::Partition`] and [`ModeOptions::pool_frames`] > 0, a second pass pools
+/// the first pass's charges of the neighbouring frames into each frame's position prior
+/// (see [`ModeOptions::pool_frames`]); otherwise frame `t` gives exactly what
+/// `find_charges(&frames[t], opts, seed)` gives.
+pub fn find_charges_sequence(
+    frames: &[GazeRays],
+    opts: &ModeOptions,
+    seed: u64,
+) -> Result<Vec<Vec<Charge>>> {
+    let pooled = match pooled_passes(frames, opts, seed)? {
+        Ok(pooled) => pooled,
+        Err(first) => return Ok(first),
+    };
     if !opts.joint_window {
         return Ok(pooled);
     }
-    let stage: Vec<Vec<super::window::Found>> = pooled
-        .iter()
-        .map(|cs| cs.iter().map(|c| (c.position, c.members.clone())).collect())
-        .collect();
-    let joint = super::window::joint_window(frames, &stage, opts)?;
+    let joint = super::window::joint_window(frames, &window_stage(&pooled), opts)?;
     frames
         .par_iter()
         .zip(joint)
@@ -1075,6 +1089,45 @@ pub fn find_charges_sequence(
             Ok(out)
         })
         .collect()
+}
+
+/// The pooled pass's charges as the joint window's stage (position, member rows).
+fn window_stage(pooled: &[Vec<Charge>]) -> Vec<Vec<super::window::Found>> {
+    pooled
+        .iter()
+        .map(|cs| cs.iter().map(|c| (c.position, c.members.clone())).collect())
+        .collect()
+}
+
+/// A diagnosis of the joint window's search on a sequence whose true groups are known (a
+/// bench's debug path, `benches/charges_diagnose.py`; no pipeline uses it): the window's
+/// objective (log likelihood minus the sources' Occam costs) of the assignment
+/// [`find_charges_sequence`] finds, of `truth` with its sources' positions fitted from
+/// nothing, and of the search started from `truth`. `truth[t][i]`: the true group (a
+/// source index) of row `i` of frame `t`, `None` for a ray that attends no charge. A
+/// found objective below the search from the truth is a search failure; the truth above
+/// both, where the answer is wrong, a model one.
+pub fn diagnose_window(
+    frames: &[GazeRays],
+    opts: &ModeOptions,
+    seed: u64,
+    truth: &[Vec<Option<usize>>],
+) -> Result<[f64; 3]> {
+    opts.validate()?;
+    if truth.len() != frames.len() || truth.iter().zip(frames).any(|(z, r)| z.len() != r.len()) {
+        return Err(crate::Error::invalid(
+            "truth",
+            "need one entry per ray of every frame",
+        ));
+    }
+    if opts.pool_frames == 0 || opts.membership != Membership::Partition || !opts.joint_window {
+        return Err(crate::Error::invalid(
+            "options",
+            "the joint window needs membership partition, pool_frames > 0 and joint_window",
+        ));
+    }
+    let pooled = pooled_passes(frames, opts, seed)?.unwrap_or_default();
+    super::window::diagnose(frames, &window_stage(&pooled), opts, truth)
 }
 
 /// The charge at `x` with member rows `members` (decided elsewhere): field value,

@@ -1638,6 +1638,22 @@ impl Model<'_> {
             .collect()
     }
 
+    /// The objective of the assignment `z` over `n_sources` sources, their positions
+    /// fitted from nothing to the rays `z` gives them (a source with fewer than
+    /// `min_members` rays in a frame is no charge there).
+    fn score(&self, z: &Assign, n_sources: usize) -> f64 {
+        let none = vec![None; self.frames.len()];
+        let pos: Positions = (0..n_sources).map(|k| self.fit(z, k, &none)).collect();
+        let mut paths = self.paths_of(z);
+        self.clean(&mut paths, n_sources);
+        let z = self.assign_of(&paths);
+        let alive: Vec<bool> = (0..n_sources)
+            .map(|k| z.iter().any(|zt| zt.contains(&Some(k))))
+            .collect();
+        let ll = self.likelihood(&paths, &pos);
+        self.objective(&z, &pos, &alive, ll)
+    }
+
     fn objective(&self, z: &Assign, pos: &Positions, alive: &[bool], ll: f64) -> f64 {
         ll - (0..alive.len())
             .filter(|&k| alive[k])
@@ -1807,6 +1823,23 @@ pub(super) fn joint_window(
             merge_copies(found, opts.merge_radius)
         })
         .collect())
+}
+
+/// The objectives of [`joint_window`]'s search from `stage`, of `truth` (the source of each
+/// row per frame, `None` for none) with its sources' positions fitted from nothing, and
+/// of the search started from `truth` (see `modes::diagnose_window`).
+pub(super) fn diagnose(
+    frames: &[GazeRays],
+    stage: &[Vec<Found>],
+    opts: &ModeOptions,
+    truth: &[Vec<Option<usize>>],
+) -> Result<[f64; 3]> {
+    let model = Model::new(frames, opts);
+    let (z, n_sources) = Model::link(frames, stage, opts);
+    let found = model.search(z, n_sources)?.0;
+    let truth: Assign = truth.to_vec();
+    let k = truth.iter().flatten().flatten().max().map_or(0, |&k| k + 1);
+    Ok([found, model.score(&truth, k), model.search(truth, k)?.0])
 }
 
 /// A frame's charges within `radius` of each other are copies of one target (the
@@ -2004,6 +2037,30 @@ mod tests {
                 assert!(near < 0.05, "frame {t}: {x}");
             }
         }
+    }
+
+    #[test]
+    fn diagnosis_scores_the_true_groups_as_the_search_does() {
+        // The two groups of `merged_scene`: the search from the true groups keeps them,
+        // and the score of the true groups with their positions fitted is the objective
+        // of that round (same fit, same likelihood, same Occam costs); a group of one is
+        // no charge, so its ray gains nothing.
+        let n_frames = 12;
+        let frames = merged_scene(n_frames, 0.08);
+        let opts = ModeOptions::default();
+        let m = model(&frames, &opts);
+        let truth: Assign =
+            vec![vec![Some(0), Some(0), Some(0), Some(1), Some(1), Some(1)]; n_frames];
+        let (searched, z, _, _) = m.search(truth.clone(), 2).unwrap();
+        assert_eq!(z, truth);
+        let score = m.score(&truth, 2);
+        assert!((score - searched).abs() < 1e-6, "{score} vs {searched}");
+        let mut lone = truth.clone();
+        lone[0] = vec![Some(0), Some(0), Some(0), Some(1), Some(1), Some(2)];
+        let mut dropped = truth.clone();
+        dropped[0][5] = None;
+        assert!((m.score(&lone, 3) - m.score(&dropped, 2)).abs() < 1e-9);
+        assert!(score > m.score(&vec![vec![Some(0); 6]; n_frames], 1));
     }
 
     #[test]
