@@ -175,6 +175,10 @@ BASE: dict[str, tuple[list[Any], dict[str, Any]]] = {
     "saliency_field": ([P_EYE[:4], V_EYE[:4], H_EYE[:4], QPTS], {}),
     "saliency_grid": ([P_EYE[:4], V_EYE[:4], H_EYE[:4], (-1, -1, 0), (1, 1, 2), (4, 4, 3)], {}),
     "find_charges": ([P_EYE, V_EYE, H_EYE, OFFSETS, 0, Opts(CHARGE_OPTS)], {}),
+    "diagnose_window": (
+        [P_EYE, V_EYE, H_EYE, OFFSETS, 0, Opts(CHARGE_OPTS), np.zeros(len(P_EYE), np.int64)],
+        {},
+    ),
     "track_charges": (
         [np.eye(4)[[0, 0, 1, 1, 2]].astype(float), np.array([0, 1, 2, 3, 4], dtype=np.int64)],
         {"bandwidth": 0.3, "max_iter": 50},

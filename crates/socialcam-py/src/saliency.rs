@@ -338,6 +338,11 @@ fn diagnose_window<'py>(
             flat.len()
         )));
     }
+    if let Some(g) = flat.iter().find(|&&g| g < -1) {
+        return Err(PyValueError::new_err(format!(
+            "truth: a group is an index >= 0 or -1 (no charge), got {g}"
+        )));
+    }
     let mut rest = flat.as_slice();
     let truth: Vec<Vec<Option<usize>>> = frames
         .iter()

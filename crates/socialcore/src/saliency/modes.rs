@@ -1120,6 +1120,13 @@ pub fn diagnose_window(
             "need one entry per ray of every frame",
         ));
     }
+    let n_rays: usize = frames.iter().map(GazeRays::len).sum();
+    if truth.iter().flatten().flatten().any(|&g| g >= n_rays) {
+        return Err(crate::Error::invalid(
+            "truth",
+            format!("group indices must be below the number of rays ({n_rays})"),
+        ));
+    }
     if opts.pool_frames == 0 || opts.membership != Membership::Partition || !opts.joint_window {
         return Err(crate::Error::invalid(
             "options",
