@@ -855,11 +855,7 @@ def _rigid_track(
     """One rigid face per track: the shape is the weighted Procrustes mean of the track's
     landmarks ``X (n, 5, 3)`` (the observed instants ``0..n-1``), and every instant gets the
     rotation and position of that shape that best reprojects onto its detections (Gauss–
-    Newton on the reprojection error in units of ``sigma``; each iteration fits the poses to
-    the current shape, then takes one step on the shape: the poses fitted to the starting
-    shape alone kept its errors as a constant turn of the track's direction, measured on
-    rendered circles with FaceMesh landmarks, dev seeds 1 2 25-27 30 31 35 36 40 41 44 46
-    50: matched exo/ego 12 -> 13 of 14 within 1.5x, pooled 1.26 -> 1.22). Returns the landmarks
+    Newton on the reprojection error in units of ``sigma``). Returns the landmarks
     ``(n, 5, 3)`` and, per instant, the covariance ``(n, 3, 3)`` of the rotation (radians²,
     world axes). With ``turn_rate``, ``centre_rate`` (m/s) also ties the positions of
     consecutive instants (plain least squares): what fixes the depth of an instant seen by
@@ -901,8 +897,9 @@ def _rigid_track(
 
     eps = 1e-6
     cov = np.full((n, 3, 3), np.nan)
+    S0 = S  # the poses are fitted to the starting shape (moved by ``o``)
     for it in range(iterations):
-        So = S + o  # the poses are fitted to the current shape (moved by ``o``)
+        So = S0 + o
         r0 = residual(Rt, c, So)
         J = np.empty((len(slot), 10, 6))
         for a in range(6):
