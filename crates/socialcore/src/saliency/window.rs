@@ -955,16 +955,7 @@ impl Model<'_> {
         let mut top = f64::NEG_INFINITY;
         while round < ROUNDS {
             round += 1;
-            pos = (0..alive.len())
-                .into_par_iter()
-                .map(|k| {
-                    if alive[k] {
-                        self.fit(&z, k, &pos[k])
-                    } else {
-                        vec![None; f]
-                    }
-                })
-                .collect();
+            pos = self.refit(&z, &pos, &alive, None);
             let (mut best_z, ll) = self.solve(&z, &pos, &alive)?;
             // Sources that explain no ray go first (they cost nothing and change nothing).
             for (k, a) in alive.iter_mut().enumerate() {
@@ -1219,9 +1210,29 @@ impl Model<'_> {
         })
     }
 
+    /// Every live source's positions fitted again given `z` (in parallel), or with `which`
+    /// only those it marks (the others keep theirs); `None` for the sources not alive.
+    fn refit(
+        &self,
+        z: &Assign,
+        pos: &Positions,
+        alive: &[bool],
+        which: Option<&[bool]>,
+    ) -> Positions {
+        let f = self.frames.len();
+        (0..alive.len())
+            .into_par_iter()
+            .map(|k| match (alive[k], which.map_or(true, |w| w[k])) {
+                (true, true) => self.fit(z, k, &pos[k]),
+                (true, false) => pos[k].clone(),
+                (false, _) => vec![None; f],
+            })
+            .collect()
+    }
+
     /// A proposal's rounds of (refit the live sources whose rays changed, decode) until
-    /// the assignment settles or a round gains nothing, at most [`ROUNDS`]; the best of the proposal and its
-    /// rounds. `from` is the assignment the move started from: the first round refits
+    /// the assignment settles or a round gains nothing, at most [`ROUNDS`]; the best of
+    /// the proposal and its rounds. `from` is the assignment the move started from: the first round refits
     /// the sources the move (and its decoding) changed, over all their frames, each later
     /// one those the decoding before it changed (a source that keeps its rays keeps its
     /// fit). A split is judged where the search would take it: a source that gave up a
@@ -1229,7 +1240,6 @@ impl Model<'_> {
     /// scene 1473: a split 11 nats below the merge as proposed, 3 above it after two
     /// rounds).
     fn settle(&self, cand: Round, from: &Assign) -> Result<Round> {
-        let f = self.frames.len();
         let mut best = cand.clone();
         let (_, mut z, mut pos, mut alive) = cand;
         let ns = alive.len();
@@ -1250,14 +1260,7 @@ impl Model<'_> {
         };
         let mut refit = changed(from, &z);
         for _ in 0..ROUNDS {
-            pos = (0..alive.len())
-                .into_par_iter()
-                .map(|k| match (alive[k], refit[k]) {
-                    (true, true) => self.fit(&z, k, &pos[k]),
-                    (true, false) => pos[k].clone(),
-                    (false, _) => vec![None; f],
-                })
-                .collect();
+            pos = self.refit(&z, &pos, &alive, Some(&refit));
             let (z2, ll) = self.solve(&z, &pos, &alive)?;
             for (k, a) in alive.iter_mut().enumerate() {
                 *a = *a && z2.iter().any(|zt| zt.contains(&Some(k)));
@@ -1281,8 +1284,7 @@ impl Model<'_> {
     /// decoded again given their positions ([`Model::redecode`]: a person on the wrong
     /// side of a move, or who looks at a third target, moves), with `settle` (the move's
     /// starting assignment) run through rounds of fit and decode ([`Model::settle`]) and,
-    /// with `extend`, given their best
-    /// extension move; the proposal with the highest objective if it beats `base`.
+    /// with `extend`, given their best extension move; the proposal with the highest objective if it beats `base`.
     fn choose(
         &self,
         mut scored: Vec<Round>,
