@@ -45,6 +45,8 @@ Lowrate (session 18, chosen on): every clip at 24 Hz from frames 23 and 61, at 3
 frame 27 and at 40 Hz from frame 50. Final18 (session 18, defined before it was run):
 every clip at 20 Hz from frames 7 and 57 where 60 frames fit (85_02), 85_02 also from
 frames 307 and 447, every clip at 24 Hz from frame 4 and at 30 Hz from frame 2.
+Final19 (defined in session 19, first run in session 21 with the robust method): every clip
+at 30 Hz from frames 13 and 73.
 "robust-rk16" is session 17's method (refine_k_max=16; session 18 raised the default to 32).
 --skeleton adds the whole-skeleton reading of Fig 4.3 (run_skeleton): only the root of each
 joint's chain is given 5 % off and every joint is reconstructed from its parent's
@@ -313,6 +315,7 @@ PARTS = (
     "final11",
     "final12",
     "final18",
+    "final19",
 )
 # Session 8's never-seen cuts: every clip sampled at 40 Hz (every third frame) from
 # frames 10 and 100, 60 frames each (the other parts sample every second frame).
@@ -339,6 +342,9 @@ LOWRATE_CUTS = ((5, 23), (5, 61), (4, 27), (3, 50))
 # clip at 24 Hz from frame 4 and at 30 Hz from frame 2 (sample phases no other part uses).
 FINAL18_CUTS = ((6, 7), (6, 57), (5, 4), (4, 2))
 FINAL18_C3D_CUTS = ((6, 307), (6, 447))
+# Session 19's never-seen cuts (defined in session 19, first run in session 21): every clip
+# at 30 Hz (every fourth frame) from frames 13 and 73.
+FINAL19_STEP, FINAL19_OFFSETS = 4, (13, 73)
 
 
 def load_clips() -> dict[str, tuple[np.ndarray, list[tuple[int, int]]]]:
@@ -425,6 +431,12 @@ def all_windows(
         if P[off::step].shape[0] >= 60
     ]
     wins += [("final18", win("85_02", P85, pairs85, s, off)) for s, off in FINAL18_C3D_CUTS]
+    wins += [
+        ("final19", win(name, P, pairs, FINAL19_STEP, off))
+        for name, (P, pairs) in clips.items()
+        for off in FINAL19_OFFSETS
+        if P[off::FINAL19_STEP].shape[0] >= 60
+    ]
     return wins
 
 
