@@ -46,7 +46,8 @@ frame 27 and at 40 Hz from frame 50. Final18 (session 18, defined before it was 
 every clip at 20 Hz from frames 7 and 57 where 60 frames fit (85_02), 85_02 also from
 frames 307 and 447, every clip at 24 Hz from frame 4 and at 30 Hz from frame 2.
 Final19 (defined in session 19, first run in session 21 with the robust method): every clip
-at 30 Hz from frames 13 and 73.
+at 30 Hz from frames 13 and 73. Final20 (defined and first run in session 22): every clip at
+40 Hz on the phase frames ≡ 0 mod 3 from frames 33 and 87, and 85_02 also from 333 and 603.
 "robust-rk16" is session 17's method (refine_k_max=16; session 18 raised the default to 32).
 --skeleton adds the whole-skeleton reading of Fig 4.3 (run_skeleton): only the root of each
 joint's chain is given 5 % off and every joint is reconstructed from its parent's
@@ -316,6 +317,7 @@ PARTS = (
     "final12",
     "final18",
     "final19",
+    "final20",
 )
 # Session 8's never-seen cuts: every clip sampled at 40 Hz (every third frame) from
 # frames 10 and 100, 60 frames each (the other parts sample every second frame).
@@ -345,6 +347,10 @@ FINAL18_C3D_CUTS = ((6, 307), (6, 447))
 # Session 19's never-seen cuts (defined in session 19, first run in session 21): every clip
 # at 30 Hz (every fourth frame) from frames 13 and 73.
 FINAL19_STEP, FINAL19_OFFSETS = 4, (13, 73)
+# Session 22's never-seen cuts (defined before they were run, first run in session 22): every
+# clip at 40 Hz (every third frame) on the sample phase no other 40 Hz part uses (frames
+# ≡ 0 mod 3) from frames 33 and 87 where 60 frames fit, and 85_02 also from frames 333 and 603.
+FINAL20_STEP, FINAL20_OFFSETS, FINAL20_C3D_OFFSETS = 3, (33, 87), (333, 603)
 
 
 def load_clips() -> dict[str, tuple[np.ndarray, list[tuple[int, int]]]]:
@@ -436,6 +442,17 @@ def all_windows(
         for name, (P, pairs) in clips.items()
         for off in FINAL19_OFFSETS
         if P[off::FINAL19_STEP].shape[0] >= 60
+    ]
+    wins += [
+        ("final20", win(name, P, pairs, FINAL20_STEP, off))
+        for name, (P, pairs) in clips.items()
+        for off in FINAL20_OFFSETS
+        if P[off::FINAL20_STEP].shape[0] >= 60
+    ]
+    wins += [
+        ("final20", win("85_02", P85, pairs85, FINAL20_STEP, off))
+        for off in FINAL20_C3D_OFFSETS
+        if P85[off::FINAL20_STEP].shape[0] >= 60
     ]
     return wins
 
