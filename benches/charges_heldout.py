@@ -12,6 +12,7 @@ groups, and the scene's parameters (people, markers, h, closest marker pair).
 from __future__ import annotations
 
 import argparse
+import itertools
 import time
 
 import numpy as np
@@ -40,6 +41,7 @@ def main() -> None:
         k, _, val = kv.partition("=")
         over[k] = eval(val)
     rows = []
+    conds: list[tuple[float, float, float, float, float]] = []
     for seed in _seeds(args.seeds):
         scene = synth.marker_check_family(seed, n_frames=args.frames)
         bounds = None if args.no_bounds else tuple(scene.room)
@@ -51,6 +53,7 @@ def main() -> None:
         dmin = min(np.linalg.norm(m[a] - m[b]) for a in range(len(m)) for b in range(a))
         moving = not np.allclose(scene.targets[0], scene.targets[-1])
         rows.append((right, err / oerr))
+        conds.append((scene.n_people / m.shape[0], max(scene.room[1][:2]), scene.h[0], err, oerr))
         print(f"seed {seed:3d}: P={scene.n_people:2d} T={m.shape[0]} h={scene.h[0]:.3f} "
               f"room={scene.room[1][0]:4.1f}x{scene.room[1][1]:4.1f} dmin={dmin:4.2f} "
               f"{'moving' if moving else 'static'}  right {right:.2f}  err/oracle "
@@ -67,6 +70,26 @@ def main() -> None:
     )
     both = ((r[:, 0] >= 0.95) & (r[:, 1] <= 1.25)).sum()
     print(f"both targets: {both}/{len(r)}")
+    _by_condition(r, np.array(conds))
+
+
+def _by_condition(r: np.ndarray, c: np.ndarray) -> None:
+    """The targets pooled over the frames of the scenes of one condition: people per
+    marker (mean group size), the room's longer side and ``h``, three bins each."""
+    bins = {
+        "people/marker": (0, [2, 3, 4.5, 6.01]),
+        "room side m": (1, [0, 10, 15, 20.01]),
+        "h": (2, [0.01, 0.02, 0.045, 0.1001]),
+    }
+    for name, (col, edges) in bins.items():
+        for lo, hi in itertools.pairwise(edges):
+            sel = (c[:, col] >= lo) & (c[:, col] < hi)
+            if not sel.any():
+                continue
+            right = r[sel, 0].mean()
+            ratio = c[sel, 3].mean() / c[sel, 4].mean()
+            print(f"  {name:13s} [{lo:5.3g}, {hi:5.3g}): {sel.sum():3d} scenes, right count "
+                  f"{right:.3f} of frames, pooled error/oracle {ratio:.3f}")  # fmt: skip
 
 
 if __name__ == "__main__":
