@@ -183,7 +183,15 @@ def main(argv: list[str]) -> None:
                 if k in ("oracle", "landmarks")
                 else None
                 if v == "None"
-                else (v == "True" if v in ("True", "False") else float(v))
+                else (
+                    tuple(float(x) for x in v.split(","))
+                    if "," in v
+                    else v == "True"
+                    if v in ("True", "False")
+                    else int(v)
+                    if v.lstrip("-").isdigit()
+                    else float(v)
+                )
             )
     seeds = [int(a) for a in argv[1:] if "=" not in a] or list(range(1, 13))
     rows = []

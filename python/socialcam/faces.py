@@ -21,8 +21,8 @@ person's right eye).
 
 from __future__ import annotations
 
-from collections.abc import Iterable, Iterator, Sequence
-from dataclasses import dataclass
+from collections.abc import Iterable, Iterator, Mapping, Sequence
+from dataclasses import dataclass, field
 from pathlib import Path
 from typing import Any
 
@@ -595,6 +595,18 @@ class FaceOptions:
         of the ego rays on 12 → 13 of 14 (35 1.57 → 0.67; 44 2.40 → 1.97 still out),
         matched median 1.12 → 1.02, pooled 1.26 → 1.14, gaze median 1.39 → 1.36°. Landmark
         sources without a measured bias (MTCNN, the bench's truth + noise) are unchanged
+    view_bias : with ``rigid``, the landmark detector's bias by the view: a face seen at yaw
+        ``θ`` from its normal comes out wider along its eye line, the eyes by ``1 + k_e g``
+        and the mouth corners by ``1 + k_m g``, and its nose tip shifted by ``n g`` metres
+        along the face's vertical, ``g = 1 / cos θ − 1`` (``θ`` capped at 70°); given as
+        ``(k_e, k_m, n)`` or, ``None`` (default), self-calibrated from the footage per
+        landmark source: the rigid faces are fitted, the bias their views' residuals
+        still show is estimated by robust least squares over every track (each track's
+        frontal residual taken off: that is the shape), and fitted again
+        (``WIDENING_ROUNDS`` rounds); the result is in ``Faces3D.view_bias``. FaceMesh sees
+        the renderer's flat faces 2–7 % wider beyond 45° and turns 2-view faces towards
+        the oblique camera by 1–2° (issue 11; ``benches/faces_attention.out.txt``);
+        ``(0, 0, 0)`` = no bias
     """
 
     rel_threshold: float = 0.1
@@ -617,6 +629,7 @@ class FaceOptions:
     single_view: bool = False
     rigid_pivot_accel: float | None = 0.1
     rigid_oblique: bool = True
+    view_bias: tuple[float, float, float] | None = None
 
     def __post_init__(self) -> None:
         for name in (
@@ -644,6 +657,14 @@ class FaceOptions:
             check_float(self.sync_tolerance, "sync_tolerance", min=0.0, min_exclusive=True)
         check_int(self.max_gap, "max_gap", min=0)
         check_int(self.refine_iterations, "refine_iterations", min=1, max=100)
+        if self.view_bias is not None:
+            if not isinstance(self.view_bias, (tuple, list)) or len(self.view_bias) != 3:
+                raise ValueError(
+                    f"view_bias: expected (eye widening, mouth widening, nose shift m) or None, "
+                    f"got {self.view_bias!r}"
+                )
+            for i, x in enumerate(self.view_bias):
+                check_float(x, f"view_bias[{i}]", min=-0.5, max=0.5)
         for name in ("rigid", "single_view", "rigid_oblique"):
             check_bool(getattr(self, name), name)
         if not isinstance(self.interocular, (tuple, list)) or len(self.interocular) != 2:
@@ -673,6 +694,9 @@ class Faces3D:
     views : (T, J) cameras that saw each face
     detection_person : per camera (N_v,) index into ``person`` of each detection, −1 when
         it joined no face (seen once, or failing every test)
+    view_bias : per landmark source, the detector's bias by the view the rigid faces were
+        fitted with (``FaceOptions.view_bias``: given, or self-calibrated from the footage):
+        eye widening, mouth widening, nose shift (m)
     """
 
     times: FloatArray
@@ -685,6 +709,7 @@ class Faces3D:
     h: FloatArray
     views: IntArray
     detection_person: tuple[IntArray, ...]
+    view_bias: Mapping[str, tuple[float, float, float]] = field(default_factory=dict)
 
     def rays(self, t: int) -> Any:
         """The :class:`socialcam.GazeRays` of instant ``t`` (ids = ``person``), or ``None``
@@ -873,6 +898,8 @@ def _rigid_track(
     turn_accel: float | None = None,
     pivot_accel: float | None = None,
     oblique: FloatArray | None = None,
+    widening: FloatArray | None = None,
+    collect: list[Any] | None = None,
 ) -> tuple[FloatArray, FloatArray]:
     """One rigid face per track: the shape is the weighted Procrustes mean of the track's
     landmarks ``X (n, 5, 3)`` (the observed instants ``0..n-1``), and every instant gets the
@@ -892,7 +919,16 @@ def _rigid_track(
     ``FaceOptions.rigid_pivot_accel``; an offset beyond ``PIVOT_MAX`` falls back to the fit
     without the pivot. ``oblique`` (per row, degrees; ``inf`` = none): beyond that angle
     between the view and the face's normal (the current pose's) the row's ``sigma`` grows
-    by ``1 + ((angle − oblique) / OBLIQUE_WIDTH)²`` (see ``OBLIQUE``)."""
+    by ``1 + ((angle − oblique) / OBLIQUE_WIDTH)²`` (see ``OBLIQUE``). ``widening`` ``(rows, 3)``: per row the
+    detector's bias by the view (``FaceOptions.view_bias``: eye widening, mouth widening,
+    nose shift in metres) at the view's yaw ``θ`` (its angle from the face's normal towards
+    the face's ``x`` axis, eye 0 → eye 1; capped at ``WIDENING_MAX_YAW``): each view's
+    predicted landmarks are moved by it (re-evaluated every iteration, like ``oblique``);
+    the face, and so the gaze, stays the unbiased shape. With ``collect`` (a list), appends
+    the views' yaws ``(rows,)``, their landmarks' residuals in the face plane ``(rows, 5, 2)``
+    (metres, observed minus predicted, along ``x`` and ``y = normal × x``), the landmarks'
+    ``x`` in the face ``(rows, 5)`` and the rows' instants' weights, for
+    :func:`_estimate_view_bias`."""
     n = len(X)
     # generalised Procrustes: align every instant to the mean shape, average, repeat
     S = X[int(np.argmax(weight))] - X[int(np.argmax(weight))].mean(0)
@@ -912,12 +948,41 @@ def _rigid_track(
     o = np.zeros(3)
     pivot = pivot_accel is not None and times is not None and n > 2
 
+    brow = np.zeros((len(slot), 5, 3))  # per view, the detector's bias (local frame)
+
     def residual(Rt_: FloatArray, c_: FloatArray, S: FloatArray = S) -> FloatArray:
-        Xw = np.einsum("nij,pj->npi", Rt_, S) + c_[:, None]  # (n, 5, 3)
-        Xc = np.einsum("rij,rpj->rpi", R[slot], Xw[step] - C[slot][:, None])
+        Sl = S[None] + brow  # (rows, 5, 3): what each view's detector reports
+        Xw = np.einsum("rij,rpj->rpi", Rt_[step], Sl) + c_[step][:, None]
+        Xc = np.einsum("rij,rpj->rpi", R[slot], Xw - C[slot][:, None])
         f = np.stack([K[slot, 0, 0], K[slot, 1, 1]], -1)[:, None]
         p = Xc[..., :2] / Xc[..., 2:] * f + K[slot, None, :2, 2]
         return ((p - uv) / sig[:, None, None]).reshape(len(slot), -1)  # (rows, 10)
+
+    def face_axes(Rt_: FloatArray, c_: FloatArray, So: FloatArray) -> tuple[FloatArray, ...]:
+        """The face's axes in the shape's frame (``x`` eye 0 → eye 1, ``n`` the normal
+        towards the cameras that see it, ``y = n × x``) and each view's yaw (degrees)."""
+        ex = So[1] - So[0]
+        ex = ex / np.linalg.norm(ex)
+        nrm = np.cross(So[1] - So[0], So[3] + So[4] - So[0] - So[1])
+        nrm /= np.linalg.norm(nrm)
+        d = np.einsum("rji,rj->ri", Rt_[step], C[slot] - c_[step]) - So.mean(0)
+        d /= np.linalg.norm(d, axis=1, keepdims=True)
+        if np.median(d @ nrm) < 0:
+            nrm = -nrm
+        ey = np.cross(nrm, ex)
+        return ex, ey, nrm, np.degrees(np.arctan2(d @ ex, d @ nrm))
+
+    def set_bias(Rt_: FloatArray, c_: FloatArray, So: FloatArray) -> None:
+        if widening is None:
+            return
+        ex, ey, _n, yaw = face_axes(Rt_, c_, So)
+        cap = np.radians(np.minimum(np.abs(yaw), WIDENING_MAX_YAW))
+        g = 1.0 / np.cos(cap) - 1.0  # (rows,)
+        xs = (So - So.mean(0)) @ ex  # (5,) the landmarks along the face's x axis
+        kx = widening[:, [0, 0, 2, 1, 1]] * xs  # eyes, nose (none), mouth corners
+        kx[:, 2] = 0.0
+        brow[:] = (g[:, None] * kx)[..., None] * ex
+        brow[:, 2] += (g * widening[:, 2])[:, None] * ey  # the nose tip along y
 
     sig = np.asarray(sigma, np.float64)
 
@@ -941,6 +1006,7 @@ def _rigid_track(
         So = S0 + o
         if oblique is not None:
             sig = oblique_sigma(Rt, c, So)
+        set_bias(Rt, c, So)
         r0 = residual(Rt, c, So)
         J = np.empty((len(slot), 10, 6))
         for a in range(6):
@@ -1022,9 +1088,87 @@ def _rigid_track(
     if pivot and np.linalg.norm(o) > PIVOT_MAX:  # no head: fit without the pivot
         return _rigid_track(
             K, R, C, step, slot, uv, sigma, X, weight, times, turn_rate, iterations, shape,
-            centre_rate, turn_accel, oblique=oblique,
+            centre_rate, turn_accel, oblique=oblique, widening=widening, collect=collect,
         )  # fmt: skip
+    if collect is not None:  # the residuals along the face's x axis, for the calibration
+        So = S0 + o
+        set_bias(Rt, c, So)
+        ex, _ey, _n, yaw = face_axes(Rt, c, So)
+        sig = np.ones(len(slot))
+        r0 = residual(Rt, c, So).reshape(-1, 5, 2)  # pixels, predicted − observed
+        keep = brow.copy()
+        Jb = np.empty((len(slot), 5, 2, 2))  # pixels per metre along the face's x and y
+        for a, ax in enumerate((ex, _ey)):
+            brow[:] = keep + 1e-4 * ax
+            Jb[..., a] = (residual(Rt, c, So).reshape(-1, 5, 2) - r0) / 1e-4
+        brow[:] = keep
+        # observed − predicted in the face plane (x, y) of each landmark
+        ok = np.abs(np.linalg.det(Jb)) > 1e-6
+        dxy = np.full((len(slot), 5, 2), np.nan)
+        dxy[ok] = -np.linalg.solve(Jb[ok], r0[ok][..., None])[..., 0]
+        xs = (So - So.mean(0)) @ ex
+        collect.append((yaw, dxy, np.broadcast_to(xs, dxy.shape[:2]), weight[step]))
     return np.einsum("nij,pj->npi", Rt, S + o) + c[:, None], cov
+
+
+#: the yaw (degrees) beyond which a view's widening (``FaceOptions.view_widening``) stops
+#: growing (1 / cos 70° − 1 = 1.9)
+WIDENING_MAX_YAW = 70.0
+#: the self-calibration of the widening (``FaceOptions.view_widening = None``): rounds of
+#: fit and estimate; views used (yaw within ``WIDENING_FIT_YAW`` degrees)
+WIDENING_ROUNDS = 2
+WIDENING_FIT_YAW = 65.0
+#: an estimated bias is shrunk to zero within this many of its standard errors
+VIEW_BIAS_SHRINK = 2.0
+
+
+def _estimate_view_bias(found: list[Any]) -> FloatArray:
+    """What the residuals of the rigid faces still show of the detector's bias by the view
+    (see ``FaceOptions.view_bias``): the eyes' and the mouth corners' widening ``k`` (their
+    residuals along the face's x axis on ``x · g``) and the nose tip's shift along y (its
+    residual along y on ``g``), ``g = 1 / cos θ − 1``, each by least squares with robust
+    (Huber) weights, pooled over the views of the multi-view instants of every track. A
+    view's frontal residual (the median of each track's views with |θ| < 20°) is the face's
+    shape, not the detector's, and is taken off first. Each estimate is shrunk by what the
+    tracks disagree on: its jackknife standard error over tracks ``σ`` (the views of one
+    track share its errors) turns it into ``x · max(0, 1 − (VIEW_BIAS_SHRINK σ / x)²)``;
+    0 where no view is oblique or fewer than 3 tracks have oblique views."""
+    parts: list[list[tuple[FloatArray, FloatArray]]] = [[], [], []]
+    for yaw, dxy, xs, w in found:
+        use = (w > 0) & (np.abs(yaw) <= WIDENING_FIT_YAW)
+        front = use & (np.abs(yaw) < 20.0)
+        if front.sum() < 3:
+            continue
+        ref = np.nanmedian(dxy[front], axis=0)
+        g = 1.0 / np.cos(np.radians(yaw[use])) - 1.0
+        for q, cols in enumerate((((0, 0), (1, 0)), ((3, 0), (4, 0)), ((2, 1),))):
+            z = np.concatenate([g * (xs[use, p_] if a == 0 else 1.0) for p_, a in cols])
+            r = np.concatenate([dxy[use, p_, a] - ref[p_, a] for p_, a in cols])
+            ok = np.isfinite(z) & np.isfinite(r) & (np.abs(z) > (1e-3 if q < 2 else 0.03))
+            if ok.any():
+                parts[q].append((z[ok], r[ok]))
+    out = np.zeros(3)
+    for q, tracks in enumerate(parts):
+        if len(tracks) < 3 or sum(len(z) for z, _ in tracks) < 20:
+            continue
+        z = np.concatenate([t[0] for t in tracks])
+        r = np.concatenate([t[1] for t in tracks])
+        w = np.ones_like(z)
+        k = 0.0
+        for _ in range(10):
+            k = float((w * z * r).sum() / max((w * z * z).sum(), 1e-18))
+            e = r - k * z
+            s_ = 1.4826 * np.median(np.abs(e)) + 1e-12
+            w = np.minimum(1.0, 1.5 * s_ / np.maximum(np.abs(e), 1e-18))
+        # jackknife over tracks, the robust weights held
+        lab = np.concatenate([np.full(len(t[0]), i) for i, t in enumerate(tracks)])
+        num = np.bincount(lab, w * z * r, len(tracks))
+        den = np.bincount(lab, w * z * z, len(tracks))
+        loo = (num.sum() - num) / np.maximum(den.sum() - den, 1e-18)
+        n = len(tracks)
+        se = float(np.sqrt((n - 1) / n * ((loo - loo.mean()) ** 2).sum()))
+        out[q] = k * max(0.0, 1.0 - (VIEW_BIAS_SHRINK * se / max(abs(k), 1e-18)) ** 2)
+    return out
 
 
 def _solve_with_offset(
@@ -1258,6 +1402,7 @@ def reconstruct_faces(
         m[frames[v][ok]] = np.nonzero(ok)[0]
         frame_to_t.append(m)
     cam_of, idx_of, slot, lms, size, frac, obl = [], [], [], [], [], [], []
+    srcs: list[str] = []
     for v, d in enumerate(detections):
         if o.landmark_noise is not None:
             fv = np.full(len(d), o.landmark_noise)
@@ -1287,6 +1432,7 @@ def reconstruct_faces(
             size.append(max(d.box[i, 2], d.box[i, 3]))
             frac.append(float(fv[i]))
             obl.append(OBLIQUE.get(d.landmark_source, np.inf))
+            srcs.append(str(d.landmark_source))
     det_person = [np.full(len(d), -1, np.int64) for d in detections]
     empty = Faces3D(
         times=readonly(times),
@@ -1307,6 +1453,7 @@ def reconstruct_faces(
     size_ = np.array(size, np.float64)
     sigma = np.maximum(o.min_noise, np.array(frac, np.float64) * size_)
     oblique_ = np.array(obl, np.float64)
+    src_ = np.array(srcs)
     slot_inst = inst_[slot_]
     group = np.full(len(slot_), -1, np.int64)
     g_inst_l: list[int] = []
@@ -1427,6 +1574,7 @@ def reconstruct_faces(
         if o.turn_rate is None or o.smoothness <= 0
         else 1.0 / (o.turn_rate * FACE_RADIUS * dt) ** 2
     )
+    rigid_jobs: list[tuple[int, IntArray, IntArray, dict[str, Any]]] = []
     for pid in persons:
         j = col[int(pid)]
         gs = np.nonzero(g_person == pid)[0]
@@ -1462,20 +1610,53 @@ def reconstruct_faces(
         Ls[ts, j] = sr[ts - t0]
         if o.rigid:
             at = np.searchsorted(ts - t0, step)
-            L[ts, j], cov = _rigid_track(
-                K_, R_, C_, at, slot_[rows], lm_[rows], sigma[rows], xr[ts - t0],
-                np.where(nviews[gs] >= 2, nviews[gs], 0).astype(np.float64), times[ts],
-                o.rigid_turn_rate, centre_rate=o.smoothness if o.smoothness > 0 else None,
+            rigid_jobs.append((j, ts, rows, dict(
+                K=K_, R=R_, C=C_, step=at, slot=slot_[rows], uv=lm_[rows], sigma=sigma[rows],
+                X=xr[ts - t0], weight=np.where(nviews[gs] >= 2, nviews[gs], 0).astype(np.float64),
+                times=times[ts], turn_rate=o.rigid_turn_rate,
+            )))  # fmt: skip
+        nv[ts, j] = nviews[gs]
+    # the rigid faces. The detector's widening of faces seen obliquely, per landmark source:
+    # given (``view_widening``) or, with ``None``, estimated from what the rigid faces leave
+    # in the residuals of the views (``_estimate_widening``), fitted again, estimated again
+    # (``WIDENING_ROUNDS``): a self-calibration from the footage
+    widen = {str(src): o.view_bias for src in np.unique(src_)}
+    used: dict[str, tuple[float, float, float]] = {}
+
+    def fit_all(ws: dict[str, FloatArray], collect: bool) -> dict[str, list[Any]]:
+        found: dict[str, list[Any]] = {src: [] for src in ws}
+        for j, ts, rows, kw in rigid_jobs:
+            kr = np.array([ws[str(x)] for x in src_[rows]], np.float64).reshape(-1, 3)
+            coll: list[Any] = []
+            Lj, cov = _rigid_track(
+                **kw, centre_rate=o.smoothness if o.smoothness > 0 else None,
                 turn_accel=o.rigid_turn_accel, pivot_accel=o.rigid_pivot_accel,
                 oblique=oblique_[rows] if o.rigid_oblique else None,
+                widening=kr if kr.any() else None, collect=coll if collect else None,
             )  # fmt: skip
+            if collect:
+                for src in np.unique(src_[rows]):
+                    m = src_[rows] == src
+                    found[str(src)].append(tuple(a[m] for a in coll[0]))
+                continue
+            L[ts, j] = Lj
             n0 = np.cross(
                 L[ts, j, 1] - L[ts, j, 0], L[ts, j, 3] + L[ts, j, 4] - L[ts, j, 0] - L[ts, j, 1]
             )
             n0 /= np.linalg.norm(n0, axis=-1, keepdims=True)
             tr = np.trace(cov, axis1=1, axis2=2) - np.einsum("ni,nij,nj->n", n0, cov, n0)
             rig_sig[ts, j] = np.sqrt(np.maximum(tr, 0.0) / 2)
-        nv[ts, j] = nviews[gs]
+        return found
+
+    if o.rigid and rigid_jobs:
+        auto = [s_ for s_, k_ in widen.items() if k_ is None]
+        est = {s_: np.zeros(3) if k_ is None else np.array(k_, float) for s_, k_ in widen.items()}
+        for _ in range(WIDENING_ROUNDS if auto else 0):
+            found = fit_all(dict(est), collect=True)
+            for src in auto:
+                est[src] = np.clip(est[src] + _estimate_view_bias(found[src]), -0.5, 0.5)
+        fit_all(dict(est), collect=False)
+        used = {s_: (float(b[0]), float(b[1]), float(b[2])) for s_, b in est.items()}
     # detections → person column
     for r in range(len(group)):
         g = group[r]
@@ -1499,6 +1680,7 @@ def reconstruct_faces(
         h=readonly(h.reshape(T, J)),
         views=readonly(nv),
         detection_person=tuple(readonly(a) for a in det_person),
+        view_bias=used,
     )
 
 
