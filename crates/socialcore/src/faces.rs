@@ -198,7 +198,12 @@ pub fn associate(
             }
         }
     }
-    pairs.sort_by(|x, y| x.0.total_cmp(&y.0));
+    // head cameras first: a wearer's own camera says who the face is, a tracked face only
+    // where it was; a track claiming by distance alone took the faces of wearers it passed
+    // in front of (a 2-view track of two people's faces, placed on one camera's line of
+    // sight through a wearer's face, is nearer to it than the wearer's camera centre)
+    let tracked = |a: usize| anchors[a].slot == usize::MAX;
+    pairs.sort_by(|x, y| tracked(x.1).cmp(&tracked(y.1)).then(x.0.total_cmp(&y.0)));
     let mut anchor_group: Vec<Option<usize>> = vec![None; anchors.len()];
     let mut used_slot: Vec<Vec<usize>> = vec![Vec::new(); anchors.len()];
     for &(_, a, i) in &pairs {
@@ -744,6 +749,34 @@ mod tests {
             gate: 0.25,
         };
         assert!(associate(&cams, &dets, &[bad], &AssociationOptions::default()).is_err());
+    }
+
+    #[test]
+    fn head_cameras_claim_before_tracks() {
+        // a track whose predicted eye midpoint sits right on a wearer's face must not take
+        // it from the wearer's own camera, 6 cm away (rendered circle 136: a ghost track of
+        // two people's faces took a wearer's detections for 30 instants)
+        let (cams, faces) = scene();
+        let dets = vec![
+            detect(&cams[0], 0, &faces[0]),
+            detect(&cams[1], 1, &faces[0]),
+        ];
+        let wearer = Anchor {
+            centre: (faces[0][0] + faces[0][1]) * 0.5 + Vector3::new(0.0, 0.0, 0.06),
+            slot: 3,
+            gate: 0.25,
+        };
+        let track = Anchor {
+            centre: (faces[0][0] + faces[0][1]) * 0.5,
+            slot: usize::MAX,
+            gate: 0.12,
+        };
+        for anchors in [[track, wearer], [wearer, track]] {
+            let a = associate(&cams, &dets, &anchors, &AssociationOptions::default()).unwrap();
+            let w = anchors.iter().position(|x| x.slot == 3).unwrap();
+            assert_eq!(a.label[0], a.label[1]);
+            assert_eq!(a.anchor[a.label[0].unwrap()], Some(w));
+        }
     }
 
     #[test]
