@@ -2,7 +2,9 @@
 
 Per scene: fraction of frames with the right number of charges, mean error of the charges
 against the markers divided by the mean error of the oracle intersection of the true
-groups, and the scene's parameters (people, markers, h, closest marker pair).
+groups, and the scene's parameters (people, markers, h, closest marker pair); then both
+targets per scene and pooled over the frames of each condition of the issue (people per
+marker, i.e. mean group size; the room's longer side; ``h``).
 
     python benches/charges_heldout.py --seeds 100-119            # the held-out figures
     python benches/charges_heldout.py --seeds 0-29 --sequence     # development seeds
