@@ -17,10 +17,12 @@ Printed per condition (Fig 4.3(c) and exact length and root, as the accuracy ben
    frame's point moved to the other root of its viewing ray on the given parent's sphere) is
    taken if it lies at least 5° nearer the prior; mean / median error per window set, main →
    this, and how many switches helped or hurt by more than 0.05.
-The local frames are built from the TRUE skeleton (the parent's and grandparent's truth, the
+The local frames are built from the TRUE skeleton (``--noisy-frames``: from every joint off
+by a smooth offset of the condition's root error, as a reconstructed skeleton would be) (the parent's and grandparent's truth, the
 true hips and chest): an upper bound on what frames from reconstructed joints would give. The
 C3D clip (85_02: markers, no anatomy) keeps main's pick.
 Run: python benches/articulated_pose_prior.py [--parts dev,held-out,...] [--seeds 0,1,2]
+[--noisy-frames]
 """
 
 from __future__ import annotations
@@ -77,6 +79,11 @@ def main() -> None:
     ap = argparse.ArgumentParser()
     ap.add_argument("--parts", default="dev,held-out,new,fresh,lowrate")
     ap.add_argument("--seeds", default="0,1,2")
+    ap.add_argument(
+        "--noisy-frames",
+        action="store_true",
+        help="build the local frames from joints each off by the condition's root error",
+    )
     args = ap.parse_args()
     parts = args.parts.split(",")
     seeds = [int(s) for s in args.seeds.split(",")]
@@ -115,12 +122,15 @@ def main() -> None:
                         M = C + (2 * s0 - s1)[:, None] * r  # the other root of each ray
                         T = prior[("131_02" if w.clip.startswith("131_01") else "131_01", j)]
                         g = par.get(p)
-                        row["d"] = distance(
-                            local_directions(w.P, j, p, g, w.P[:, p] + X - parent), T
-                        )
+                        Pf = w.P
+                        if args.noisy_frames:  # every joint of the frame off like the parent
+                            frng = np.random.default_rng([s, j, 99])
+                            Pf = w.P + np.stack([smooth_offset(F, kw["root"] * length.mean(), frng)
+                                                 for _ in range(w.P.shape[1])], axis=1)  # fmt: skip
+                        row["d"] = distance(local_directions(Pf, j, p, g, Pf[:, p] + X - parent), T)
                         row["d_true"] = distance(local_directions(w.P, j, p, g, w.P[:, j]), T)
                         row["d_mirror"] = distance(
-                            local_directions(w.P, j, p, g, w.P[:, p] + M - parent), T
+                            local_directions(Pf, j, p, g, Pf[:, p] + M - parent), T
                         )
                         row["err_mirror"] = float(np.linalg.norm(M - w.P[:, j]) / length)
                     rows.append(row)
