@@ -17,9 +17,10 @@ Printed per condition (Fig 4.3(c) and exact length and root, as the accuracy ben
    frame's point moved to the other root of its viewing ray on the given parent's sphere) is
    taken if it lies at least 5° nearer the prior; mean / median error per window set, main →
    this, and how many switches helped or hurt by more than 0.05.
-The local frames are built from the TRUE skeleton (``--noisy-frames``: from every joint off
-by a smooth offset of the condition's root error, as a reconstructed skeleton would be) (the parent's and grandparent's truth, the
-true hips and chest): an upper bound on what frames from reconstructed joints would give. The
+The local frames are built from the TRUE skeleton (the parent's and grandparent's truth, the
+true hips and chest): an upper bound on what frames from reconstructed joints would give;
+``--noisy-frames`` builds them from every joint off by a smooth offset of the condition's root
+error, as a reconstructed skeleton would be. The
 C3D clip (85_02: markers, no anatomy) keeps main's pick.
 Run: python benches/articulated_pose_prior.py [--parts dev,held-out,...] [--seeds 0,1,2]
 [--noisy-frames]

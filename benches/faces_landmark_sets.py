@@ -26,50 +26,26 @@ from collections import defaultdict
 from pathlib import Path
 
 import numpy as np
+from scipy.spatial.transform import Rotation
 
-from socialcam.faces import FACEMESH_CROP, FACEMESH_MARGIN, _facemesh, _frames_of
+from socialcam.faces import _facemesh, _facemesh_points, _frames_of
 from socialcam.synth.evaluate import truth_detections
 from socialcam.synth.render import load_truth
 
+INNER = [33, 133, 362, 263, 468, 473, 61, 291, 0, 17, 6, 168, 70, 300, 105, 334]
 SETS = {
     "iris+mouth (4)": [468, 473, 61, 291],
     "eye corners+mouth (6)": [33, 133, 362, 263, 61, 291],
-    "inner (16)": [33, 133, 362, 263, 468, 473, 61, 291, 0, 17, 6, 168, 70, 300, 105, 334],
-    "wide (24)": [
-        33,
-        133,
-        362,
-        263,
-        468,
-        473,
-        61,
-        291,
-        0,
-        17,
-        6,
-        168,
-        70,
-        300,
-        105,
-        334,
-        10,
-        152,
-        50,
-        280,
-        234,
-        454,
-        127,
-        356,
-    ],
+    "inner (16)": INNER,
+    "wide (24)": [*INNER, 10, 152, 50, 280, 234, 454, 127, 356],
     "all 468": list(range(468)),
 }
 
 
 def measure(folder: Path, seed: int) -> dict[str, np.ndarray]:
-    """Per detection of the truth (the bench's boxes): FaceMesh's 478 points in the image
-    (pixels) and in its crop frame (x, y, z), the camera, and the true face."""
-    import cv2
-
+    """Per detection of the truth (the bench's boxes): FaceMesh's 478 points on the crop
+    ``refine_landmarks`` uses (``x, y`` image pixels, ``z`` its relative depth), the ray to the
+    face, the camera, and the true face."""
     truth = load_truth(folder)
     dets, cams = truth_detections(truth, scale=1.0, seed=seed)
     rows: dict[str, list[np.ndarray]] = defaultdict(list)
@@ -85,21 +61,12 @@ def measure(folder: Path, seed: int) -> dict[str, np.ndarray]:
             for k, img in enumerate(images):
                 for i in d.in_frame(k):
                     _, p = who[i]
-                    b = d.box[i]
-                    side = max(b[2], b[3])
-                    cx, cy = b[0] + 0.5 * b[2], b[1] + 0.5 * b[3]
-                    s = FACEMESH_CROP / (FACEMESH_MARGIN * side)
-                    x0, y0 = cx - 0.5 * FACEMESH_MARGIN * side, cy - 0.5 * FACEMESH_MARGIN * side
-                    A = np.array([[s, 0, -s * x0 + 0.5 * s - 0.5], [0, s, -s * y0 + 0.5 * s - 0.5]])
-                    crop = cv2.warpAffine(np.asarray(img), A, (FACEMESH_CROP, FACEMESH_CROP),
-                                          flags=cv2.INTER_CUBIC, borderMode=cv2.BORDER_REPLICATE)  # fmt: skip
-                    res = model.process(np.ascontiguousarray(crop))
-                    if not res.multi_face_landmarks:
+                    pts = _facemesh_points(model, np.asarray(img), d.box[i])
+                    if pts is None:
                         continue
-                    M = np.array([[q.x, q.y, q.z] for q in res.multi_face_landmarks[0].landmark])
-                    ray = np.linalg.solve(K, [cx, cy, 1.0])
-                    rows["xy"].append((M[:, :2] * FACEMESH_CROP - 0.5 - A[:, 2]) / s)
-                    rows["M"].append(M)
+                    b = d.box[i]
+                    ray = np.linalg.solve(K, [b[0] + 0.5 * b[2], b[1] + 0.5 * b[3], 1.0])
+                    rows["M"].append(pts)
                     rows["ray"].append(ray / np.linalg.norm(ray))
                     rows["K"].append(K)
                     rows["R"].append(truth.R[v][k])
@@ -118,19 +85,15 @@ def _unit(a: np.ndarray) -> np.ndarray:
 
 def one_view(z: dict[str, np.ndarray]) -> None:
     M, R, n = z["M"], z["R"], z["n"]
-    nm = _unit(np.cross(M[:, 263] - M[:, 33], M[:, 10] - M[:, 152]))  # crop frame, -z = frontal
-    # the crop frame is the camera frame turned so that its z is the ray to the face
+    # x, y, z: the crop's frame up to scale and shift (-z = a frontal face), which weak
+    # perspective turns with the ray to the face
+    nm = _unit(np.cross(M[:, 263] - M[:, 33], M[:, 10] - M[:, 152]))
     zc = np.array([0.0, 0.0, 1.0])
-    world = np.empty_like(nm)
-    for i, ray in enumerate(z["ray"]):
-        ax = np.cross(zc, ray)
-        sa, ca = np.linalg.norm(ax), float(zc @ ray)
-        Q = np.eye(3)
-        if sa > 1e-12:
-            a = ax / sa
-            X = np.array([[0, -a[2], a[1]], [a[2], 0, -a[0]], [-a[1], a[0], 0]])
-            Q = np.eye(3) + sa * X + (1 - ca) * X @ X
-        world[i] = R[i].T @ (Q @ nm[i])
+    axis = np.cross(zc, z["ray"])
+    sin = np.linalg.norm(axis, axis=1)
+    angle = np.arctan2(sin, z["ray"] @ zc)
+    turn = Rotation.from_rotvec(axis * (angle / np.where(sin > 0, sin, 1.0))[:, None])
+    world = np.einsum("nji,nj->ni", R, turn.apply(nm))
     across = _unit(np.cross([0.0, 0.0, 1.0], n))
     to_cam = _unit(z["C"] - z["centre"])
     yaw = np.degrees(np.arctan2((to_cam * across).sum(1), (to_cam * n).sum(1)))
@@ -148,7 +111,7 @@ def one_view(z: dict[str, np.ndarray]) -> None:
 
 
 def views_together(z: dict[str, np.ndarray]) -> None:
-    xy, K, R, C, n = z["xy"], z["K"], z["R"], z["C"], z["n"]
+    xy, K, R, C, n = z["M"][:, :, :2], z["K"], z["R"], z["C"], z["n"]
     groups: dict[tuple[int, int], list[int]] = defaultdict(list)
     for i, (k, p) in enumerate(z["kp"]):
         groups[(int(k), int(p))].append(i)
@@ -191,7 +154,7 @@ def main(argv: list[str]) -> None:
             raise SystemExit(f"{folder}: no render; run benches/faces_attention.py {out} {seed} "
                              "landmarks=facemesh first")  # fmt: skip
         z = measure(folder, seed)
-        print(f"circle {seed}: {len(z['xy'])} faces measured by FaceMesh")
+        print(f"circle {seed}: {len(z['M'])} faces measured by FaceMesh")
         one_view(z)
         views_together(z)
 

@@ -263,13 +263,11 @@ def _facemesh() -> Any:
     )  # fmt: skip
 
 
-def _facemesh_one(
-    model: Any, img: U8Image, box: FloatArray, lm: FloatArray
-) -> tuple[FloatArray, bool]:
-    """The five landmarks of one face measured by FaceMesh on a crop around its ``box``
-    (``x, y, w, h``) and ``True``; ``lm`` (the detector's) and ``False`` when FaceMesh finds
-    no face there or one whose landmarks lie more than a quarter of the box from ``lm``
-    (another face)."""
+def _facemesh_points(model: Any, img: U8Image, box: FloatArray) -> FloatArray | None:
+    """FaceMesh's 478 points ``(478, 3)`` for the face in ``box`` (``x, y, w, h``), measured
+    on a square crop of ``FACEMESH_CROP`` pixels around it: ``x, y`` in image pixels and ``z``
+    FaceMesh's relative depth in the same pixels (larger = farther); ``None`` when FaceMesh
+    finds no face there."""
     import cv2
 
     side = max(float(box[2]), float(box[3]))
@@ -282,11 +280,24 @@ def _facemesh_one(
                           borderMode=cv2.BORDER_REPLICATE)  # fmt: skip
     res = model.process(np.ascontiguousarray(crop))
     if not res.multi_face_landmarks:
+        return None
+    m = np.array([[q.x, q.y, q.z] for q in res.multi_face_landmarks[0].landmark]) * FACEMESH_CROP
+    out: FloatArray = np.column_stack([(m[:, :2] - 0.5 - A[:, 2]) / s, m[:, 2] / s])
+    return out
+
+
+def _facemesh_one(
+    model: Any, img: U8Image, box: FloatArray, lm: FloatArray
+) -> tuple[FloatArray, bool]:
+    """The five landmarks of one face measured by FaceMesh on a crop around its ``box``
+    (``x, y, w, h``) and ``True``; ``lm`` (the detector's) and ``False`` when FaceMesh finds
+    no face there or one whose landmarks lie more than a quarter of the box from ``lm``
+    (another face)."""
+    pts = _facemesh_points(model, img, box)
+    if pts is None:
         return lm, False
-    pts = res.multi_face_landmarks[0].landmark
-    m = np.array([[pts[i].x, pts[i].y] for i in FACEMESH_LANDMARKS]) * FACEMESH_CROP - 0.5
-    out: FloatArray = (m - A[:, 2]) / s
-    if float(np.linalg.norm(out - lm, axis=1).mean()) > 0.25 * side:
+    out: FloatArray = pts[list(FACEMESH_LANDMARKS), :2]
+    if float(np.linalg.norm(out - lm, axis=1).mean()) > 0.25 * max(float(box[2]), float(box[3])):
         return lm, False
     return out, True
 
