@@ -38,6 +38,8 @@ __all__ = [
     "SkeletonReconstruction",
     "articulated_bqp",
     "articulated_reconstructability",
+    "bend_angles",
+    "learn_bend_ranges",
     "reconstruct_articulated",
     "reconstruct_skeleton",
     "solve_bqp",
@@ -332,6 +334,16 @@ class ArticulatedOptions:
         the bench's CMU windows it lowers the Fig 4.3(c) mean error by 2–5 % and leaves
         the error at exact length and root unchanged, but on one test scene (131_01) it
         raises the median.
+    bend_weight : robust method, with a bend prior (``grandparent`` and ``bend_range`` of
+        :func:`reconstruct_articulated`, or ``Skeleton.bend_ranges``): weight of the prior in
+        the same score, ``bend_weight × mean_t (e_t / bend_tolerance)²``, ``e_t`` the angle by
+        which the start's bend (the angle between the joint's bone and its parent's bone) at
+        frame ``t`` leaves the range; ≥ 0, 0 ignores the prior. At 1, a start outside the
+        range by one tolerance at every frame scores as if it fitted the pixels one standard
+        deviation worse.
+    bend_tolerance : robust method, with a bend prior: the angle, radians (> 0; default 5°),
+        by which a bend outside the range counts as one unit. The bend computed from a parent
+        and grandparent a few percent of their bones off is itself off by several degrees.
     max_iter : Levenberg–Marquardt iterations of the refinement (≥ 1).
     time_limit : seconds per binary program (the best incumbent is used after it), or
         ``None``.
@@ -353,6 +365,8 @@ class ArticulatedOptions:
     child_slack: float = 0.1
     length_weight: float = 0.0
     average_starts: bool = False
+    bend_weight: float = 1.0
+    bend_tolerance: float = float(np.radians(5.0))
     max_iter: int = 100
     time_limit: float | None = None
     node_limit: int | None = DEFAULT_NODE_LIMIT
@@ -372,6 +386,10 @@ class ArticulatedOptions:
         check_int(self.refine_k_max, "refine_k_max", min=0, max=10_000)
         check_float(self.child_slack, "child_slack", min=0.0, max=1e6)
         check_float(self.length_weight, "length_weight", min=0.0, max=1e6)
+        check_float(self.bend_weight, "bend_weight", min=0.0, max=1e6)
+        check_float(
+            self.bend_tolerance, "bend_tolerance", min=0.0, max=float(np.pi), min_exclusive=True
+        )
         check_int(self.max_iter, "max_iter", min=1, max=100_000)
         if self.time_limit is not None:
             check_float(self.time_limit, "time_limit", min=0.0, max=1e9)
@@ -401,6 +419,8 @@ def reconstruct_articulated(
     length: float,
     *,
     children: Sequence[tuple[npt.ArrayLike, float]] | None = None,
+    grandparent: npt.ArrayLike | None = None,
+    bend_range: tuple[float, float] | None = None,
     options: ArticulatedOptions | None = None,
     **overrides: Any,
 ) -> ArticulatedTrajectory:
@@ -418,6 +438,13 @@ def reconstruct_articulated(
         missing; bone length from this joint in metres)`` each. The robust method rejects
         starts that leave a child's ray out of its reach (``child_slack``); the thesis
         method ignores them.
+    grandparent, bend_range : a prior on how the joint bends (not in the thesis): the
+        parent's parent, (F, 3) metres, and ``(lo, hi)`` radians within [0, π], the range
+        of the angle between the joint's bone and the parent's bone (e.g. learned from motion
+        capture with :func:`learn_bend_ranges`). The robust method scores each start's
+        excess beyond the range (``bend_weight``, ``bend_tolerance``): where the pixels and
+        smoothness cannot tell the two roots of a ray apart, the impostor side often bends
+        the body where it does not bend. Both or neither.
     options : :class:`ArticulatedOptions`; ``overrides`` replace some of its fields
         (e.g. ``k=10, method="thesis"``).
 
@@ -446,11 +473,29 @@ def reconstruct_articulated(
                 check_float(lc, f"children[{c}] length", min=0.0, min_exclusive=True),
             )
         )
+    if (grandparent is None) != (bend_range is None):
+        raise ValueError("grandparent, bend_range: give both (a bend prior) or neither")
+    bend = None
+    if grandparent is not None and bend_range is not None:
+        g_ = as_float_array(grandparent, "grandparent", (f, 3))
+        lo, hi = _bend_range(bend_range, "bend_range")
+        bend = (g_, lo, hi)
     t = _times(cameras)
     d = _core.reconstruct_articulated(
-        cameras.K, cameras.R, cameras.C, x_, p_, t, length_, opts, kids
+        cameras.K, cameras.R, cameras.C, x_, p_, t, length_, opts, kids, bend
     )
     return _traj(d, t)
+
+
+def _bend_range(r: object, name: str) -> tuple[float, float]:
+    """``(lo, hi)`` radians, checked."""
+    v = np.asarray(r, dtype=float) if not isinstance(r, (str, bytes)) else None
+    if v is None or v.shape != (2,):
+        raise ValueError(f"{name}: expected (lo, hi) in radians, got {r!r}")
+    lo, hi = float(v[0]), float(v[1])
+    if not (np.isfinite(lo) and np.isfinite(hi) and 0.0 <= lo <= hi <= np.pi):
+        raise ValueError(f"{name}: need 0 <= lo <= hi <= pi radians, got ({lo}, {hi})")
+    return lo, hi
 
 
 def articulated_bqp(
@@ -532,21 +577,31 @@ class Skeleton:
     names : joint names, length ``J``.
     parents : (J,) parent index per joint, ``-1`` for the single root.
     lengths : (J,) bone length from the parent, metres (ignored for the root).
+    bend_ranges : optional (J, 2) ``(lo, hi)`` radians per joint, the range of the angle
+        between the joint's bone and its parent's bone (a NaN row = no prior; the rows of the
+        root and of its children are ignored: they have no parent bone), e.g. from
+        :func:`learn_bend_ranges`. :func:`reconstruct_skeleton` gives each joint its range
+        with its reconstructed grandparent (``bend_weight`` of :class:`ArticulatedOptions`).
 
     Raises
     ------
     ValueError
-        Not a tree (no or several roots, a cycle, a parent out of range) or a non-positive
-        bone length.
+        Not a tree (no or several roots, a cycle, a parent out of range), a non-positive
+        bone length, a bend range outside 0 ≤ lo ≤ hi ≤ π.
     """
 
     names: tuple[str, ...]
     parents: tuple[int, ...]
     lengths: FloatArray
+    bend_ranges: FloatArray | None
     order: tuple[int, ...] = field(init=False)
 
     def __init__(
-        self, names: Sequence[str], parents: Sequence[int], lengths: npt.ArrayLike
+        self,
+        names: Sequence[str],
+        parents: Sequence[int],
+        lengths: npt.ArrayLike,
+        bend_ranges: npt.ArrayLike | None = None,
     ) -> None:
         names_ = tuple(str(n) for n in names)
         parents_ = tuple(int(p) for p in parents)
@@ -557,10 +612,26 @@ class Skeleton:
         # The root has no bone; the core ignores its entry.
         order = _core.skeleton_order(list(parents_), _bone_lengths(parents_, lengths_))
         lengths_.setflags(write=False)
+        ranges_ = None
+        if bend_ranges is not None:
+            ranges_ = np.array(as_float_array(bend_ranges, "bend_ranges", (j, 2), allow_nan=True))
+            for i, row in enumerate(ranges_):
+                if np.isnan(row).any():
+                    if not np.isnan(row).all():
+                        raise ValueError(f"bend_ranges: row {i} must be finite or entirely NaN")
+                    continue
+                _bend_range(row, f"bend_ranges[{i}]")
+            ranges_.setflags(write=False)
         object.__setattr__(self, "names", names_)
         object.__setattr__(self, "parents", parents_)
         object.__setattr__(self, "lengths", lengths_)
+        object.__setattr__(self, "bend_ranges", ranges_)
         object.__setattr__(self, "order", tuple(order))
+
+    def with_bend_ranges(self, bend_ranges: npt.ArrayLike | None) -> Skeleton:
+        """The same tree with ``bend_ranges`` ((J, 2) radians, NaN rows = none; ``None``
+        removes them)."""
+        return Skeleton(self.names, self.parents, self.lengths, bend_ranges)
 
     @property
     def root(self) -> int:
@@ -647,7 +718,8 @@ def reconstruct_skeleton(
     ----------
     x : (F, J, 2) pixels of every joint (NaN rows missing).
     cameras : ``F`` cameras, one per frame.
-    skeleton : the tree and bone lengths.
+    skeleton : the tree, bone lengths and, optionally, bend ranges (a prior; see
+        :class:`Skeleton`).
     root : (F, 3) root trajectory, metres.
     options, overrides : as in :func:`reconstruct_articulated`, for every joint.
     """
@@ -660,8 +732,86 @@ def reconstruct_skeleton(
     r_ = as_float_array(root, "root", (f, 3))
     t = _times(cameras)
     lengths = _bone_lengths(skeleton.parents, skeleton.lengths)
+    ranges = None
+    if skeleton.bend_ranges is not None:
+        ranges = [
+            None if np.isnan(r).any() else (float(r[0]), float(r[1])) for r in skeleton.bend_ranges
+        ]
     X, dicts = _core.reconstruct_skeleton(
-        cameras.K, cameras.R, cameras.C, x_, list(skeleton.parents), lengths, r_, t, opts
+        cameras.K, cameras.R, cameras.C, x_, list(skeleton.parents), lengths, r_, t, opts, ranges
     )
     joints = tuple(None if d is None else _traj(d, t) for d in dicts)
     return SkeletonReconstruction(readonly(X), joints)
+
+
+def bend_angles(positions: npt.ArrayLike, parents: Sequence[int]) -> FloatArray:
+    """The bend of every joint in every frame: the angle, radians, between the joint's bone
+    (parent → joint) and its parent's bone (grandparent → parent).
+
+    Parameters
+    ----------
+    positions : (F, J, 3) joint positions, metres (e.g. motion capture).
+    parents : (J,) parent per joint, ``-1`` for the root (e.g. ``Skeleton.parents``).
+
+    Returns
+    -------
+    (F, J) radians in [0, π]; NaN for the root and its children (no parent bone) and where a bone has
+    no length.
+    """
+    parents_ = [int(p) for p in parents]
+    j = len(parents_)
+    P = as_float_array(positions, "positions", (None, j, 3))
+    out = np.full(P.shape[:2], np.nan)
+    for c, p in enumerate(parents_):
+        if p < -1 or p >= j:
+            raise ValueError(f"parents: joint {c} has parent {p}, out of range")
+        if p == -1 or parents_[p] == -1:
+            continue
+        a = P[:, c] - P[:, p]
+        b = P[:, p] - P[:, parents_[p]]
+        na, nb = np.linalg.norm(a, axis=1), np.linalg.norm(b, axis=1)
+        ok = (na > 0) & (nb > 0)
+        cos = np.einsum("ij,ij->i", a[ok], b[ok]) / (na[ok] * nb[ok])
+        out[ok, c] = np.arccos(np.clip(cos, -1.0, 1.0))
+    return out
+
+
+def learn_bend_ranges(
+    positions: npt.ArrayLike | Sequence[npt.ArrayLike],
+    parents: Sequence[int],
+    *,
+    quantiles: tuple[float, float] = (0.0, 1.0),
+    margin: float = 0.0,
+) -> FloatArray:
+    """Bend ranges for :class:`Skeleton` learned from motion capture.
+
+    Parameters
+    ----------
+    positions : (F, J, 3) joint positions, metres, or a list of such clips (same joints).
+    parents : (J,) parent per joint, ``-1`` for the root.
+    quantiles : the range's ends as quantiles of each joint's bend over every frame (the
+        default, min and max).
+    margin : radians added on both sides (≥ 0), the range then clipped to [0, π].
+
+    Returns
+    -------
+    (J, 2) ``(lo, hi)`` radians; NaN rows for the root and its children.
+    """
+    if isinstance(positions, (list, tuple)) and not positions:
+        raise ValueError("positions: no clip given")
+    clips: list[Any] = (
+        list(positions)
+        if isinstance(positions, (list, tuple)) and np.ndim(positions[0]) == 3
+        else [positions]
+    )
+    q0, q1 = (check_float(q, "quantiles", min=0.0, max=1.0) for q in quantiles)
+    if q0 > q1:
+        raise ValueError(f"quantiles: need lo <= hi, got {quantiles}")
+    m = check_float(margin, "margin", min=0.0, max=float(np.pi))
+    bends = np.concatenate([bend_angles(c, parents) for c in clips], axis=0)
+    out = np.full((bends.shape[1], 2), np.nan)
+    for c in range(bends.shape[1]):
+        v = bends[:, c][np.isfinite(bends[:, c])]
+        if v.size:
+            out[c] = np.clip([np.quantile(v, q0) - m, np.quantile(v, q1) + m], 0.0, np.pi)
+    return out

@@ -204,6 +204,10 @@ struct PyArticulatedOptions {
     #[pyo3(attribute)]
     average_starts: bool,
     #[pyo3(attribute)]
+    bend_weight: f64,
+    #[pyo3(attribute)]
+    bend_tolerance: f64,
+    #[pyo3(attribute)]
     max_iter: usize,
     #[pyo3(attribute)]
     time_limit: Option<f64>,
@@ -237,6 +241,8 @@ fn art_options(o: &PyArticulatedOptions) -> PyResult<ArticulatedOptions> {
         child_slack: o.child_slack,
         length_weight: o.length_weight,
         average_starts: o.average_starts,
+        bend_weight: o.bend_weight,
+        bend_tolerance: o.bend_tolerance,
         lm: socialcore::geometry::LmOptions {
             max_iterations: o.max_iter,
             ..defaults.lm
@@ -280,7 +286,7 @@ fn result_dict<'py>(
 
 /// One articulated trajectory (Eq 4.5–4.12); returns a dict (see `_core.pyi`).
 #[pyfunction]
-#[pyo3(signature = (k_mat, r_mat, c_mat, x, parent, times, length, options, children=Vec::new()))]
+#[pyo3(signature = (k_mat, r_mat, c_mat, x, parent, times, length, options, children=Vec::new(), bend=None))]
 #[allow(clippy::too_many_arguments)]
 fn reconstruct_articulated<'py>(
     py: Python<'py>,
@@ -293,6 +299,7 @@ fn reconstruct_articulated<'py>(
     length: f64,
     options: Bound<'py, PyAny>,
     children: Vec<(PyReadonlyArray2<'py, f64>, f64)>,
+    bend: Option<(PyReadonlyArray2<'py, f64>, f64, f64)>,
 ) -> PyResult<Bound<'py, pyo3::types::PyDict>> {
     let options: PyArticulatedOptions = crate::convert::options(&options, "ArticulatedOptions")?;
     let cams = cameras(&k_mat, &r_mat, &c_mat)?;
@@ -311,15 +318,23 @@ fn reconstruct_articulated<'py>(
             })
         })
         .collect::<PyResult<Vec<_>>>()?;
+    // (grandparent (F, 3), lo, hi), the range in radians.
+    let bend = bend
+        .map(|(g, lo, hi)| points(&g, "grandparent", f).map(|g| (g, lo, hi)))
+        .transpose()?;
     let r = detach(py, || {
-        art::reconstruct_articulated_with(&cams, &px, &par, &t, length, &kids, &opts)
+        let prior = bend.as_ref().map(|(g, lo, hi)| art::BendPrior {
+            grandparent: g,
+            range: (*lo, *hi),
+        });
+        art::reconstruct_articulated_prior(&cams, &px, &par, &t, length, &kids, prior, &opts)
     })?;
     result_dict(py, r)
 }
 
 /// Whole skeleton from its root (Eq 4.6): `(X (F,J,3), [dict or None per joint])`.
 #[pyfunction]
-#[pyo3(signature = (k_mat, r_mat, c_mat, x, parents, lengths, root, times, options))]
+#[pyo3(signature = (k_mat, r_mat, c_mat, x, parents, lengths, root, times, options, bend_ranges=None))]
 #[allow(clippy::too_many_arguments)]
 fn reconstruct_skeleton<'py>(
     py: Python<'py>,
@@ -332,12 +347,16 @@ fn reconstruct_skeleton<'py>(
     root: PyReadonlyArray2<'py, f64>,
     times: PyReadonlyArray1<'py, f64>,
     options: Bound<'py, PyAny>,
+    bend_ranges: Option<Vec<Option<(f64, f64)>>>,
 ) -> PyResult<(
     Bound<'py, PyArray3<f64>>,
     Vec<Option<Bound<'py, pyo3::types::PyDict>>>,
 )> {
     let options: PyArticulatedOptions = crate::convert::options(&options, "ArticulatedOptions")?;
-    let sk = skeleton(parents, lengths)?;
+    let mut sk = skeleton(parents, lengths)?;
+    if let Some(ranges) = bend_ranges {
+        sk = map(sk.with_bend_ranges(ranges))?;
+    }
     let cams = cameras(&k_mat, &r_mat, &c_mat)?;
     let f = cams.len();
     let nj = sk.n_joints();

@@ -76,6 +76,16 @@ pub const MOTION_WEIGHT: f64 = 2.0;
 /// it is not on by default.
 pub const LENGTH_WEIGHT: f64 = 20.0;
 
+/// Default of [`ArticulatedOptions::bend_weight`]: a start that leaves the bend range by
+/// one [`ArticulatedOptions::bend_tolerance`] at every frame scores as if it fitted the
+/// pixels worse by this many standard deviations of the cost (see [`BendPrior`]).
+pub const BEND_WEIGHT: f64 = 1.0;
+
+/// Default of [`ArticulatedOptions::bend_tolerance`], radians (5°): the bend of a joint
+/// computed from a parent and grandparent a few percent of their bones off turns by several
+/// degrees, so a start only counts as leaving the range by whole multiples of this.
+pub const BEND_TOLERANCE: f64 = 5.0 * std::f64::consts::PI / 180.0;
+
 /// Roughness (Eq 4.12 on the refined unit directions) below which two starts count as
 /// equally smooth: keeps the logarithm finite for trajectories inside the basis.
 pub const ROUGHNESS_FLOOR: f64 = 1e-6;
@@ -172,6 +182,14 @@ pub struct ArticulatedOptions {
     /// error by 2–5 % and leaves the exact-length error unchanged, but raises the median
     /// on one test scene.
     pub average_starts: bool,
+    /// Robust method, with a [`BendPrior`]: weight of the prior in the selection score,
+    /// `+ bend_weight · mean_t (e_t / bend_tolerance)²`, `e_t` the angle by which the
+    /// start's bend at frame `t` leaves the prior's range ([`BEND_WEIGHT`]); ≥ 0, 0 ignores
+    /// the prior.
+    pub bend_weight: f64,
+    /// Robust method, with a [`BendPrior`]: the angle (radians, > 0) by which a bend
+    /// outside the range counts as one unit ([`BEND_TOLERANCE`]).
+    pub bend_tolerance: f64,
 }
 
 impl Default for ArticulatedOptions {
@@ -196,6 +214,8 @@ impl Default for ArticulatedOptions {
             child_slack: CHILD_SLACK,
             length_weight: 0.0,
             average_starts: false,
+            bend_weight: BEND_WEIGHT,
+            bend_tolerance: BEND_TOLERANCE,
         }
     }
 }
@@ -234,6 +254,78 @@ fn children_miss(
         }
     }
     total
+}
+
+/// A prior on how a joint bends: the angle between the joint's bone (parent → joint) and
+/// its parent's bone (grandparent → parent) lies in `range` (radians, `0 ≤ lo ≤ hi ≤ π`).
+///
+/// The two roots of a viewing ray on the parent's sphere (Fig 4.2(a)) fit the pixels alike,
+/// and where neither the pixels nor smoothness (Eq 4.12) tell them apart the impostor side
+/// often bends the body where it does not bend: a spine folded backwards, a head bent
+/// onto the shoulder. The thesis has no such prior (its Sec 4.4 decides by smoothness
+/// alone). The range is learned from motion capture (e.g. the min and max over a clip of
+/// another trial); the robust method adds the start's mean squared excess beyond it, in
+/// units of [`ArticulatedOptions::bend_tolerance`], to its selection score. One angle per
+/// joint rather than a direction in a local frame: the frame of a given or reconstructed
+/// parent is a few percent of its bones off, which turns a local frame by 5–10° but the
+/// bend angle only by the angle error of the two bones.
+#[derive(Debug, Clone, Copy)]
+pub struct BendPrior<'a> {
+    /// Grandparent positions, metres, one per camera frame.
+    pub grandparent: &'a [Vector3<f64>],
+    /// `(lo, hi)`, radians.
+    pub range: (f64, f64),
+}
+
+/// The angle (radians) by which each frame's bend leaves `range`: the angle between
+/// `points[t] − parent[t]` and `parent[t] − grandparent[t]` below `lo` or above `hi`, 0
+/// inside (and where a bone has no length).
+pub fn bend_excess(
+    points: &[Vector3<f64>],
+    parent: &[Vector3<f64>],
+    grandparent: &[Vector3<f64>],
+    range: (f64, f64),
+) -> Vec<f64> {
+    points
+        .iter()
+        .zip(parent.iter().zip(grandparent))
+        .map(|(x, (p, g))| {
+            let (a, b) = (x - p, p - g);
+            let (na, nb) = (a.norm(), b.norm());
+            if !(na > 0.0 && nb > 0.0) {
+                return 0.0;
+            }
+            let angle = (a.dot(&b) / (na * nb)).clamp(-1.0, 1.0).acos();
+            (range.0 - angle).max(angle - range.1).max(0.0)
+        })
+        .collect()
+}
+
+fn validate_bend(bend: &BendPrior<'_>, frames: usize, name: &str) -> Result<()> {
+    if bend.grandparent.len() != frames {
+        return Err(Error::invalid(
+            name,
+            format!(
+                "need one grandparent position per camera frame ({frames}), got {}",
+                bend.grandparent.len()
+            ),
+        ));
+    }
+    if bend
+        .grandparent
+        .iter()
+        .any(|g| !g.iter().all(|v| v.is_finite()))
+    {
+        return Err(Error::invalid(name, "grandparent positions must be finite"));
+    }
+    let (lo, hi) = bend.range;
+    if !(lo.is_finite() && hi.is_finite() && 0.0 <= lo && lo <= hi && hi <= std::f64::consts::PI) {
+        return Err(Error::invalid(
+            name,
+            format!("range must satisfy 0 ≤ lo ≤ hi ≤ π radians, got ({lo}, {hi})"),
+        ));
+    }
+    Ok(())
 }
 
 /// One reconstructed articulated trajectory.
@@ -684,7 +776,7 @@ type Refined = (DVector<f64>, DVector<f64>, f64, usize, bool);
 type Evaluated = (f64, Matrix3<f64>, Refined);
 
 /// The evidence of one refined start for [`select_start`].
-#[derive(Debug, Clone, Copy, PartialEq)]
+#[derive(Debug, Clone, Copy, PartialEq, Default)]
 pub(crate) struct StartEvidence {
     /// Reprojection cost of Eq 4.5 (with the length prior), pixels².
     pub cost: f64,
@@ -697,6 +789,9 @@ pub(crate) struct StartEvidence {
     pub children: f64,
     /// Refined bone length, metres.
     pub radius: f64,
+    /// Score of the bend prior ([`BendPrior`]): `bend_weight · mean_t (e_t / tolerance)²`
+    /// (0 without a prior).
+    pub bend: f64,
 }
 
 /// Weights of the selection score: `(smooth_weight, motion_weight, length_weight)`.
@@ -786,7 +881,8 @@ pub(crate) fn start_scores_at(
         let s = (total(e) - cmin) / sd
             + log(e.roughness, smooth)
             + log(e.motion, motion)
-            + longer(e.radius);
+            + longer(e.radius)
+            + e.bend;
         if e.roughness.is_nan() || e.motion.is_nan() || s.is_nan() {
             f64::INFINITY
         } else {
@@ -883,7 +979,33 @@ pub fn reconstruct_articulated_with(
     children: &[ChildObservations],
     opts: &ArticulatedOptions,
 ) -> Result<ArticulatedResult> {
+    reconstruct_articulated_prior(cameras, pixels, parent, times, length, children, None, opts)
+}
+
+/// [`reconstruct_articulated_with`] with a prior on the joint's bend ([`BendPrior`]): the
+/// robust method adds `bend_weight · mean_t (e_t / bend_tolerance)²` to each start's
+/// selection score; the thesis method ignores it.
+#[allow(clippy::too_many_arguments)]
+pub fn reconstruct_articulated_prior(
+    cameras: &[Camera],
+    pixels: &[Option<Vector2<f64>>],
+    parent: &[Vector3<f64>],
+    times: &[f64],
+    length: f64,
+    children: &[ChildObservations],
+    bend: Option<BendPrior<'_>>,
+    opts: &ArticulatedOptions,
+) -> Result<ArticulatedResult> {
     validate_common(cameras, pixels, parent, times, length)?;
+    if let Some(b) = &bend {
+        validate_bend(b, cameras.len(), "bend")?;
+    }
+    if !(opts.bend_tolerance.is_finite() && opts.bend_tolerance > 0.0) {
+        return Err(Error::invalid(
+            "bend_tolerance",
+            format!("must be positive and finite, got {}", opts.bend_tolerance),
+        ));
+    }
     for (c, child) in children.iter().enumerate() {
         if child.pixels.len() != cameras.len() {
             return Err(Error::invalid(
@@ -936,6 +1058,7 @@ pub fn reconstruct_articulated_with(
         ("motion_weight", opts.motion_weight),
         ("child_slack", opts.child_slack),
         ("length_weight", opts.length_weight),
+        ("bend_weight", opts.bend_weight),
     ] {
         if !(w.is_finite() && w >= 0.0) {
             return Err(Error::invalid(
@@ -1056,12 +1179,25 @@ pub fn reconstruct_articulated_with(
         } else {
             0.0
         };
+        let bend = match (&bend, robust && opts.bend_weight > 0.0) {
+            (Some(b), true) => {
+                let excess = bend_excess(&points, parent, b.grandparent, b.range);
+                opts.bend_weight
+                    * excess
+                        .iter()
+                        .map(|e| (e / opts.bend_tolerance).powi(2))
+                        .sum::<f64>()
+                    / f.max(1) as f64
+            }
+            _ => 0.0,
+        };
         StartEvidence {
             cost: *cost,
             roughness: finite(rough),
             motion: finite(motion),
             children: finite(children),
             radius: *r,
+            bend: finite(bend),
         }
     };
     for radius in radii {
@@ -1426,6 +1562,8 @@ mod tests;
 pub struct Skeleton {
     parents: Vec<Option<usize>>,
     lengths: Vec<f64>,
+    /// Per joint, the range of its bend ([`BendPrior`]), radians; `None` = no prior.
+    bend_ranges: Vec<Option<(f64, f64)>>,
     /// Joints in an order where every parent precedes its children, root first.
     order: Vec<usize>,
 }
@@ -1494,10 +1632,48 @@ impl Skeleton {
             ));
         }
         Ok(Skeleton {
+            bend_ranges: vec![None; j],
             parents,
             lengths,
             order,
         })
+    }
+
+    /// The skeleton with a bend range per joint (radians, `0 ≤ lo ≤ hi ≤ π`; `None` = no
+    /// prior). A range on the root or on a child of the root is ignored (no grandparent).
+    pub fn with_bend_ranges(mut self, ranges: Vec<Option<(f64, f64)>>) -> Result<Self> {
+        if ranges.len() != self.parents.len() {
+            return Err(Error::invalid(
+                "bend_ranges",
+                format!(
+                    "expected one entry per joint ({}), got {}",
+                    self.parents.len(),
+                    ranges.len()
+                ),
+            ));
+        }
+        for (j, r) in ranges.iter().enumerate() {
+            if let Some((lo, hi)) = *r {
+                if !(lo.is_finite()
+                    && hi.is_finite()
+                    && 0.0 <= lo
+                    && lo <= hi
+                    && hi <= std::f64::consts::PI)
+                {
+                    return Err(Error::invalid(
+                        "bend_ranges",
+                        format!("joint {j}: need 0 ≤ lo ≤ hi ≤ π radians, got ({lo}, {hi})"),
+                    ));
+                }
+            }
+        }
+        self.bend_ranges = ranges;
+        Ok(self)
+    }
+
+    /// Per joint, its bend range ([`Skeleton::with_bend_ranges`]).
+    pub fn bend_ranges(&self) -> &[Option<(f64, f64)>] {
+        &self.bend_ranges
     }
 
     pub fn n_joints(&self) -> usize {
@@ -1563,13 +1739,22 @@ pub fn reconstruct_skeleton(
                 length: skeleton.lengths()[c],
             })
             .collect();
-        let res = reconstruct_articulated_with(
+        let grand = skeleton.parents()[p].and_then(|g| traj[g].clone());
+        let bend = match (skeleton.bend_ranges()[j], grand.as_deref()) {
+            (Some(range), Some(g)) => Some(BendPrior {
+                grandparent: g,
+                range,
+            }),
+            _ => None,
+        };
+        let res = reconstruct_articulated_prior(
             cameras,
             &px,
             &parent,
             times,
             skeleton.lengths()[j],
             &kids,
+            bend,
             opts,
         )
         .map_err(|e| match e {
