@@ -48,6 +48,12 @@ frames 307 and 447, every clip at 24 Hz from frame 4 and at 30 Hz from frame 2.
 Final19 (defined in session 19, first run in session 21 with the robust method): every clip
 at 30 Hz from frames 13 and 73. Final20 (defined and first run in session 22): every clip at
 40 Hz on the phase frames ≡ 0 mod 3 from frames 33 and 87, and 85_02 also from 333 and 603.
+Final21 (defined in session 25 before it was run): every clip at 30 Hz on the phase frames
+≡ 0 mod 4 from frames 8 and 56, and 85_02 also from 208 and 508.
+"robust-bend" (session 25) adds a bend prior: per joint with a grandparent, the range of the
+angle between its bone and its parent's bone over every frame of the other trial's clips
+(131_01* judged by 131_02* and the reverse; none on 85_02's markers), the grandparent given
+5 % of its own bone off like the parent (bend_weight 1; "robust-bend3" at 3).
 "robust-rk16" is session 17's method (refine_k_max=16; session 18 raised the default to 32).
 --skeleton adds the whole-skeleton reading of Fig 4.3 (run_skeleton): only the root of each
 joint's chain is given 5 % off and every joint is reconstructed from its parent's
@@ -371,6 +377,7 @@ PARTS = (
     "final18",
     "final19",
     "final20",
+    "final21",
 )
 # Session 8's never-seen cuts: every clip sampled at 40 Hz (every third frame) from
 # frames 10 and 100, 60 frames each (the other parts sample every second frame).
@@ -404,6 +411,10 @@ FINAL19_STEP, FINAL19_OFFSETS = 4, (13, 73)
 # clip at 40 Hz (every third frame) on the sample phase no other 40 Hz part uses (frames
 # ≡ 0 mod 3) from frames 33 and 87 where 60 frames fit, and 85_02 also from frames 333 and 603.
 FINAL20_STEP, FINAL20_OFFSETS, FINAL20_C3D_OFFSETS = 3, (33, 87), (333, 603)
+# Session 25's never-seen cuts (defined before they were run, first run with the bend prior):
+# every clip at 30 Hz (every fourth frame) on the sample phase no other 30 Hz part uses
+# (frames ≡ 0 mod 4) from frames 8 and 56 where 60 frames fit, and 85_02 also from 208 and 508.
+FINAL21_STEP, FINAL21_OFFSETS, FINAL21_C3D_OFFSETS = 4, (8, 56), (208, 508)
 
 
 def load_clips() -> dict[str, tuple[np.ndarray, list[tuple[int, int]]]]:
@@ -506,6 +517,17 @@ def all_windows(
         ("final20", win("85_02", P85, pairs85, FINAL20_STEP, off))
         for off in FINAL20_C3D_OFFSETS
         if P85[off::FINAL20_STEP].shape[0] >= 60
+    ]
+    wins += [
+        ("final21", win(name, P, pairs, FINAL21_STEP, off))
+        for name, (P, pairs) in clips.items()
+        for off in FINAL21_OFFSETS
+        if P[off::FINAL21_STEP].shape[0] >= 60
+    ]
+    wins += [
+        ("final21", win("85_02", P85, pairs85, FINAL21_STEP, off))
+        for off in FINAL21_C3D_OFFSETS
+        if P85[off::FINAL21_STEP].shape[0] >= 60
     ]
     return wins
 
