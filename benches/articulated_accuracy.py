@@ -50,10 +50,12 @@ at 30 Hz from frames 13 and 73. Final20 (defined and first run in session 22): e
 40 Hz on the phase frames ≡ 0 mod 3 from frames 33 and 87, and 85_02 also from 333 and 603.
 Final21 (defined in session 25 before it was run): every clip at 30 Hz on the phase frames
 ≡ 0 mod 4 from frames 8 and 56, and 85_02 also from 208 and 508.
-"robust-bend" (session 25) adds a bend prior: per joint with a grandparent, the range of the
-angle between its bone and its parent's bone over every frame of the other trial's clips
-(131_01* judged by 131_02* and the reverse; none on 85_02's markers), the grandparent given
-5 % of its own bone off like the parent (bend_weight 1; "robust-bend3" at 3).
+"robust-angles" (session 25) adds angle priors (angle_priors): per joint, the range of the
+angle between its bone and its parent's bone (with a grandparent) and each sibling's bone
+(other children of its parent) over every frame of the other trial's clips (131_01* judged by
+131_02* and the reverse; none on 85_02's markers), the grandparent and siblings given 5 % of
+their own bones off like the parent (angle_weight 1; "robust-angles3" at 3); "robust-bend"
+the parent's bone only, "robust-sib" the siblings only.
 "robust-rk16" is session 17's method (refine_k_max=16; session 18 raised the default to 32).
 --skeleton adds the whole-skeleton reading of Fig 4.3 (run_skeleton): only the root of each
 joint's chain is given 5 % off and every joint is reconstructed from its parent's
@@ -187,20 +189,24 @@ def run(
     F = w.P.shape[0]
     x, rng = observed(w, j, noise, missing, seed)
     parent = w.P[:, p] + smooth_offset(F, root * bone(w, j, p), rng)
-    bend = None
+    priors = []
+    ranges = ANGLE_RANGES.get(w.clip, {})
+    kinds = PRIOR_METHODS.get(method, ())
     g = dict(w.pairs).get(p)
-    ranges = BEND_RANGES.get(w.clip)
-    if (
-        method in BEND_METHODS
-        and ranges is not None
-        and g is not None
-        and np.isfinite(ranges[j]).all()
-    ):
-        # The grandparent as given as the parent: off by a smooth 5 % of its own bone (its
-        # own draw, so the other methods' pixels and parent are unchanged).
+    if "bend" in kinds and g is not None and (j, g, p) in ranges:
+        # The grandparent given like the parent: off by a smooth 5 % of its own bone (its own
+        # draw, so the other methods' pixels and parent are unchanged).
         rng_g = np.random.default_rng(seed * 1000 + 17 * j + 5)
         grand = w.P[:, g] + smooth_offset(F, root * bone(w, p, g), rng_g)
-        bend = (grand, (float(ranges[j, 0]), float(ranges[j, 1])))
+        priors.append((parent - grand, ranges[j, g, p]))
+    if "siblings" in kinds:
+        for c, pc in w.pairs:
+            if pc == p and c != j and (j, p, c) in ranges:
+                # A sibling (another child of the parent; on the pelvis or thorax the angle
+                # between the two bones is nearly constant), given 5 % of its bone off.
+                rng_s = np.random.default_rng(seed * 1000 + 17 * j + 6 + c)
+                sibling = w.P[:, c] + smooth_offset(F, root * bone(w, c, p), rng_s)
+                priors.append((sibling - parent, ranges[j, p, c]))
     points = reconstruct(
         w,
         j,
@@ -212,7 +218,7 @@ def run(
         scale=scale,
         missing=missing,
         seed=seed,
-        bend=bend,
+        priors=priors,
     )
     return float(np.linalg.norm(points - w.P[:, j]) / np.linalg.norm(w.P[:, j] - w.P[:, p]))
 
@@ -229,12 +235,12 @@ def reconstruct(
     scale: float,
     missing: float,
     seed: int,
-    bend: tuple[np.ndarray, tuple[float, float]] | None = None,
+    priors: list[tuple[np.ndarray, tuple[float, float]]] | None = None,
 ) -> np.ndarray:
     """Joint ``j`` from its pixels ``x`` and the given ``parent`` trajectory, the bone
     ``scale`` × its true mean length; methods not in WITHOUT_CHILDREN also get the pixels of
-    ``j``'s children (drawn as in :func:`observed`) and their bones × ``scale``; ``bend``:
-    (grandparent (F, 3), range in radians), the bend prior."""
+    ``j``'s children (drawn as in :func:`observed`) and their bones × ``scale``; ``priors``:
+    angle priors ``(reference bones (F, 3), range in radians)``."""
     children = [
         (observed(w, c, noise, missing, seed)[0], bone(w, c, j) * scale)
         for c, pc in w.pairs
@@ -247,8 +253,7 @@ def reconstruct(
         bone(w, j, p) * scale,
         k=K_DCT,
         children=children,
-        grandparent=None if bend is None else bend[0],
-        bend_range=None if bend is None else bend[1],
+        angle_priors=priors,
         **METHOD_OPTIONS[method],
     )
     return out.points
@@ -328,19 +333,27 @@ METHOD_OPTIONS: dict[str, dict] = {
     "robust-avg": {"method": "robust", "average_starts": True},
     "robust-avg-lw20": {"method": "robust", "average_starts": True, "length_weight": 20.0},
     "robust-bend": {"method": "robust"},
-    "robust-bend3": {"method": "robust", "bend_weight": 3.0},
+    "robust-sib": {"method": "robust"},
+    "robust-angles": {"method": "robust"},
+    "robust-angles3": {"method": "robust", "angle_weight": 3.0},
 }
-# Methods given a bend prior (BVH clips, joints with a grandparent): the range of the angle
-# between the joint's bone and its parent's bone over every frame of the OTHER trial's clips
-# (131_01* judged by 131_02* and the reverse; same subject, so optimistic for other people).
-BEND_METHODS = ("robust-bend", "robust-bend3")
-BEND_RANGES: dict[str, np.ndarray] = {}
+# Methods given angle priors (BVH clips): the ranges learned with learn_angle_ranges over
+# every frame of the OTHER trial's clips (131_01* judged by 131_02* and the reverse; same
+# subject, so optimistic for other people): "bend" the angle to the parent's bone (joints
+# with a grandparent), "siblings" to every sibling's bone (other children of the parent).
+PRIOR_METHODS: dict[str, tuple[str, ...]] = {
+    "robust-bend": ("bend",),
+    "robust-sib": ("siblings",),
+    "robust-angles": ("bend", "siblings"),
+    "robust-angles3": ("bend", "siblings"),
+}
+ANGLE_RANGES: dict[str, dict[tuple[int, int, int], tuple[float, float]]] = {}
 
 
-def bend_ranges(
+def angle_ranges(
     clips: dict[str, tuple[np.ndarray, list[tuple[int, int]]]],
-) -> dict[str, np.ndarray]:
-    """Per BVH clip, the bend ranges (J, 2) radians learned from the other trial's clips."""
+) -> dict[str, dict[tuple[int, int, int], tuple[float, float]]]:
+    """Per BVH clip, the angle priors learned from the other trial's clips."""
     out = {}
     for name, (P, pairs) in clips.items():
         if not name.startswith("131_"):
@@ -349,7 +362,7 @@ def bend_ranges(
         for c, pc in pairs:
             parents[c] = pc
         others = [Q for n, (Q, _) in clips.items() if n.startswith("131_") and n[:6] != name[:6]]
-        out[name] = sc.learn_bend_ranges(others, parents)
+        out[name] = sc.learn_angle_ranges(others, parents)
     return out
 
 
@@ -550,14 +563,14 @@ def main() -> None:
     if not set(parts) <= set(PARTS):
         raise SystemExit(f"--parts: choose among {', '.join(PARTS)}")
     methods = [
-        m for m in METHOD_OPTIONS if (args.full or m not in FULL_ONLY) and m not in BEND_METHODS
+        m for m in METHOD_OPTIONS if (args.full or m not in FULL_ONLY) and m not in PRIOR_METHODS
     ]
     if args.methods:
         methods = [m for m in args.methods.split(",") if m]
         if not set(methods) <= set(METHOD_OPTIONS):
             raise SystemExit(f"--methods: choose among {', '.join(METHOD_OPTIONS)}")
     clips = load_clips()
-    BEND_RANGES.update(bend_ranges(clips))
+    ANGLE_RANGES.update(angle_ranges(clips))
     wins = all_windows(clips, static=args.static_camera)
     wins = [(part, w) for part, w in wins if part in parts]
     good = [(part, w, j, p) for part, w in wins for j, p in w.pairs if w.eta[j] > 1.25]

@@ -600,31 +600,56 @@ def test_bad_children_are_refused_by_name() -> None:
             sc.reconstruct_articulated(x, cams, parent, 0.4, k=4, children=children)
 
 
-# ---------------------------------------------- robust method, a bend prior (issue 12, s25)
-def _trial_ranges(trial: str, skeleton: sc.Skeleton, keep: list[int]) -> np.ndarray:
-    """Bend ranges (J, 2) radians learned from every clip of CMU 131 trial ``trial``."""
+# --------------------------------------- robust method, angle priors (issue 12, session 25)
+def _trial_ranges(
+    trial: str, skeleton: sc.Skeleton, keep: list[int], **kinds: bool
+) -> dict[tuple[int, int, int], tuple[float, float]]:
+    """Angle priors (radians) learned from every clip of CMU 131 trial ``trial``."""
     clips = [
         load_bvh(f).positions[:, keep]
         for f in sorted((DATA / "mocap").glob(f"cmu_131_{trial}_*.bvh"))
     ]
     assert len(clips) == 4
-    return sc.learn_bend_ranges(clips, skeleton.parents)
+    return sc.learn_angle_ranges(clips, skeleton.parents, **kinds)
+
+
+def _clip_window(name: str) -> tuple[np.ndarray, sc.Skeleton, list[int], sc.Cameras, np.ndarray]:
+    """CMU ``name`` frames 0, 2, …, 118, seen as in the bench: ``(P, skeleton, keep,
+    cameras, pixels)``."""
+    m = load_bvh(DATA / "mocap" / name)
+    skeleton, keep = sc.Skeleton.from_bvh(m)
+    P = m.positions[0::2][:60][:, keep]
+    cams, px = _orbit(P, P.mean(axis=1))
+    return P, skeleton, keep, cams, px
+
+
+def _fig43c_children(
+    P: np.ndarray, px: np.ndarray, skeleton: sc.Skeleton, j: int, seed: int
+) -> list[tuple[np.ndarray, float]]:
+    """Joint ``j``'s children as the bench gives them: pixels drawn as in
+    :func:`_fig43c_draw`, bones × 1.05."""
+    return [
+        (
+            _fig43c_draw(P, px, c, j, seed)[0],
+            1.05 * float(np.linalg.norm(P[:, c] - P[:, j], axis=1).mean()),
+        )
+        for c in range(len(skeleton.names))
+        if skeleton.parents[c] == j
+    ]
 
 
 def test_the_bend_prior_rejects_the_impostor_head() -> None:
     # CMU 131_02 walking to a stop (frames 850, 852, …, 968), Fig 4.3(c) conditions; the
-    # bend prior learned from the OTHER trial (131_01's four clips), the grandparent given
-    # 5 % of its bone off like the parent. Head (η_a 1.32) and Chest2 (1.27): where the
-    # pixels, Eq 4.12 and least motion keep a start that bends the head or the upper spine
-    # beyond anything the other trial does, the prior hands the selection to one inside the
-    # range. Measured on seeds 0–5, without → with the prior: Head 0.23 0.25 0.22 0.24 0.29
-    # 0.31 → 0.23 0.13 0.22 0.24 0.12 0.11, Chest2 0.23 0.24 0.21 0.32 0.09 0.36 → 0.23
-    # 0.17 0.21 0.23 0.09 0.36 (pooled mean 0.249 → 0.195).
-    m = load_bvh(DATA / "mocap" / "cmu_131_02_stop300.bvh")
-    skeleton, keep = sc.Skeleton.from_bvh(m)
-    P = m.positions[0::2][:60][:, keep]
-    cams, px = _orbit(P, P.mean(axis=1))
-    ranges = _trial_ranges("01", skeleton, keep)
+    # bend prior (the angle between the joint's bone and its parent's bone) learned from the
+    # OTHER trial (131_01's four clips), the grandparent given 5 % of its bone off like the
+    # parent. Head (η_a 1.32) and Chest2 (1.27): where the pixels, Eq 4.12 and least motion
+    # keep a start that bends the head or the upper spine beyond anything the other trial
+    # does, the prior hands the selection to one inside the range. Measured on seeds 0–5,
+    # without → with the prior: Head 0.23 0.25 0.22 0.24 0.29 0.31 → 0.23 0.13 0.22 0.24
+    # 0.12 0.11, Chest2 0.23 0.24 0.21 0.32 0.09 0.36 → 0.23 0.17 0.21 0.23 0.09 0.36 (pooled
+    # mean 0.249 → 0.195).
+    P, skeleton, keep, cams, px = _clip_window("cmu_131_02_stop300.bvh")
+    ranges = _trial_ranges("01", skeleton, keep, siblings=False)
     F = P.shape[0]
     errs: dict[bool, list[float]] = {True: [], False: []}
     for name, seed in itertools.product(("Head", "Chest2"), range(6)):
@@ -633,27 +658,13 @@ def test_the_bend_prior_rejects_the_impostor_head() -> None:
         g = skeleton.parents[p]
         x, parent, r, den = _fig43c_draw(P, px, j, p, seed)
         rg = float(np.linalg.norm(P[:, p] - P[:, g], axis=1).mean())
-        grand = P[:, g] + _smooth_offset(
-            F, 0.05 * rg, np.random.default_rng(seed * 1000 + 17 * j + 5)
-        )
-        kids = [
-            (
-                _fig43c_draw(P, px, c, j, seed)[0],
-                1.05 * float(np.linalg.norm(P[:, c] - P[:, j], axis=1).mean()),
-            )
-            for c in range(len(skeleton.names))
-            if skeleton.parents[c] == j
-        ]
+        rng = np.random.default_rng(seed * 1000 + 17 * j + 5)
+        grand = P[:, g] + _smooth_offset(F, 0.05 * rg, rng)
+        kids = _fig43c_children(P, px, skeleton, j, seed)
+        prior = [(parent - grand, ranges[j, g, p])]
         for on in (True, False):
             out = sc.reconstruct_articulated(
-                x,
-                cams,
-                parent,
-                1.05 * r,
-                k=8,
-                children=kids,
-                grandparent=grand if on else None,
-                bend_range=tuple(ranges[j]) if on else None,
+                x, cams, parent, 1.05 * r, k=8, children=kids, angle_priors=prior if on else None
             )
             errs[on].append(float(np.linalg.norm(out.points - P[:, j]) / den))
     on_, off_ = np.array(errs[True]), np.array(errs[False])
@@ -661,120 +672,153 @@ def test_the_bend_prior_rejects_the_impostor_head() -> None:
     assert (on_ < off_ + 0.02).all(), errs  # where the prior changes nothing it costs nothing
     assert (on_ < off_ - 0.05).sum() >= 3, errs
     # Weight 0 reads no prior.
-    out0 = sc.reconstruct_articulated(
-        x,
-        cams,
-        parent,
-        1.05 * r,
-        k=8,
-        children=kids,
-        grandparent=grand,
-        bend_range=tuple(ranges[j]),
-        bend_weight=0.0,
+    out0, out1 = (
+        sc.reconstruct_articulated(
+            x, cams, parent, 1.05 * r, k=8, children=kids, angle_priors=prior, angle_weight=w
+        )
+        for w in (0.0, 1.0)
     )
-    out1 = sc.reconstruct_articulated(x, cams, parent, 1.05 * r, k=8, children=kids)
-    np.testing.assert_array_equal(out0.points, out1.points)
+    plain = sc.reconstruct_articulated(x, cams, parent, 1.05 * r, k=8, children=kids)
+    np.testing.assert_array_equal(out0.points, plain.points)
+    assert out1.points.shape == plain.points.shape
 
 
-def test_bend_angles_and_learned_ranges() -> None:
-    # A chain root → a → b → c: b's bone turns 10°..40° from a's, c's 90° from b's.
+def test_bone_angles_and_learned_ranges() -> None:
+    # A tree root → a → b → c and root → s: b's bone turns 10°..40° from a's, c's stays at
+    # 90° from b's, s's bone is fixed (a sibling of a, at 90° from it).
     t = np.radians(np.linspace(10.0, 40.0, 31))
     F = len(t)
-    P = np.zeros((F, 4, 3))
+    P = np.zeros((F, 5, 3))
     P[:, 1] = [0.0, 0.1, 0.0]
     P[:, 2] = P[:, 1] + 0.3 * np.c_[np.sin(t), np.cos(t), np.zeros(F)]
     d = (P[:, 2] - P[:, 1]) / 0.3
-    perp = np.c_[d[:, 1], -d[:, 0], np.zeros(F)]
-    P[:, 3] = P[:, 2] + 0.2 * perp
-    parents = [-1, 0, 1, 2]
-    b = sc.bend_angles(P, parents)
-    assert np.isnan(b[:, :2]).all()
-    np.testing.assert_allclose(b[:, 2], t, atol=1e-9)
-    np.testing.assert_allclose(b[:, 3], np.pi / 2, atol=1e-9)
-    r = sc.learn_bend_ranges(P, parents)
-    np.testing.assert_allclose(r[2], np.radians([10.0, 40.0]), atol=1e-9)
-    np.testing.assert_allclose(r[3], [np.pi / 2, np.pi / 2], atol=1e-9)
-    assert np.isnan(r[:2]).all()
-    r = sc.learn_bend_ranges([P, P[:10]], parents, quantiles=(0.5, 0.5), margin=2.0)
-    assert r[2, 0] == 0.0 and r[3, 1] == np.pi  # clipped to [0, π]
-    sk = sc.Skeleton(["r", "a", "b", "c"], parents, [0.0, 0.1, 0.3, 0.2], bend_ranges=r)
-    assert sk.bend_ranges is not None and sk.with_bend_ranges(None).bend_ranges is None
+    P[:, 3] = P[:, 2] + 0.2 * np.c_[d[:, 1], -d[:, 0], np.zeros(F)]
+    P[:, 4] = [0.2, 0.0, 0.0]
+    parents = [-1, 0, 1, 2, 0]
+    np.testing.assert_allclose(sc.bone_angles(P, (1, 2), (0, 1)), t, atol=1e-9)
+    np.testing.assert_allclose(sc.bone_angles(P, (2, 3), (1, 2)), np.pi / 2, atol=1e-9)
+    assert np.isnan(sc.bone_angles(P, (0, 0), (0, 1))).all()  # a bone without length
+    r = sc.learn_angle_ranges(P, parents)
+    assert set(r) == {(2, 0, 1), (3, 1, 2), (1, 0, 4), (4, 0, 1)}
+    np.testing.assert_allclose(r[2, 0, 1], np.radians([10.0, 40.0]), atol=1e-9)
+    np.testing.assert_allclose(r[3, 1, 2], [np.pi / 2, np.pi / 2], atol=1e-9)
+    np.testing.assert_allclose(r[1, 0, 4], [np.pi / 2, np.pi / 2], atol=1e-9)
+    assert set(sc.learn_angle_ranges(P, parents, siblings=False)) == {(2, 0, 1), (3, 1, 2)}
+    assert set(sc.learn_angle_ranges(P, parents, bend=False)) == {(1, 0, 4), (4, 0, 1)}
+    r = sc.learn_angle_ranges([P, P[:10]], parents, quantiles=(0.5, 0.5), margin=2.0)
+    assert r[2, 0, 1][0] == 0.0 and r[3, 1, 2][1] == np.pi  # clipped to [0, π]
+    sk = sc.Skeleton(["r", "a", "b", "c", "s"], parents, [0.0, 0.1, 0.3, 0.2, 0.2], angle_ranges=r)
+    assert len(sk.angle_ranges) == 4 and sk.with_angle_ranges(None).angle_ranges == ()
 
 
-def test_bad_bend_priors_are_refused_by_name(scene: Scene) -> None:
+def test_bad_angle_priors_are_refused_by_name(scene: Scene) -> None:
     j = scene.skeleton.index("LeftElbow")
     p = scene.skeleton.parents[j]
     g = scene.skeleton.parents[p]
     x, parent, r, _ = _fig43c_draw(scene.P, scene.px, j, p, 0)
-    grand = scene.P[:, g]
+    ref = scene.P[:, p] - scene.P[:, g]
     cases = [
-        (dict(grandparent=grand), r"^grandparent, bend_range: give both"),
-        (dict(bend_range=(0.2, 0.9)), r"^grandparent, bend_range: give both"),
-        (dict(grandparent=grand, bend_range=(0.9, 0.2)), r"^bend_range: need 0 <= lo"),
-        (dict(grandparent=grand, bend_range=(0.2, 3.5)), r"^bend_range: need 0 <= lo"),
-        (dict(grandparent=grand, bend_range=(0.2,)), r"^bend_range: expected \(lo, hi\)"),
-        (dict(grandparent=grand, bend_range="ab"), r"^bend_range: expected \(lo, hi\)"),
-        (dict(grandparent=grand[:5], bend_range=(0.2, 0.9)), r"^grandparent: expected shape"),
-        (dict(grandparent=np.full_like(grand, np.nan), bend_range=(0.2, 0.9)), r"^grandparent"),
-        (dict(bend_tolerance=0.0), r"^bend_tolerance"),
-        (dict(bend_weight=-1.0), r"^bend_weight"),
+        ([(ref, (0.9, 0.2))], r"^angle_priors\[0\] range: need 0 <= lo"),
+        ([(ref, (0.2, 3.5))], r"^angle_priors\[0\] range: need 0 <= lo"),
+        ([(ref, (0.2,))], r"^angle_priors\[0\] range: expected \(lo, hi\)"),
+        ([(ref, "ab")], r"^angle_priors\[0\] range: expected \(lo, hi\)"),
+        ([(ref[:5], (0.2, 0.9))], r"^angle_priors\[0\] reference: expected shape"),
+        ([(np.full_like(ref, np.nan), (0.2, 0.9))], r"^angle_priors\[0\] reference"),
+        ([ref], r"^angle_priors\[0\]: expected a \(reference"),
+        (ref, r"^angle_priors: expected a sequence"),
     ]
-    for kw, message in cases:
+    for priors, message in cases:
+        with pytest.raises(ValueError, match=message):
+            sc.reconstruct_articulated(x, scene.cams, parent, r, k=8, angle_priors=priors)
+    for kw, message in (
+        (dict(angle_tolerance=0.0), r"^angle_tolerance"),
+        (dict(angle_weight=-1.0), r"^angle_weight"),
+    ):
         with pytest.raises(ValueError, match=message):
             sc.reconstruct_articulated(x, scene.cams, parent, r, k=8, **kw)
     sk = scene.skeleton
     J = len(sk.names)
-    with pytest.raises(ValueError, match=r"^bend_ranges: expected shape"):
-        sk.with_bend_ranges(np.zeros((J - 1, 2)))
-    half = np.full((J, 2), np.nan)
-    half[3, 0] = 0.2
-    with pytest.raises(ValueError, match=r"^bend_ranges: row 3 must be finite or entirely NaN"):
-        sk.with_bend_ranges(half)
-    bad = np.full((J, 2), np.nan)
-    bad[3] = [0.9, 0.2]
-    with pytest.raises(ValueError, match=r"^bend_ranges\[3\]: need 0 <= lo"):
-        sk.with_bend_ranges(bad)
+    bad_ranges = [
+        ({(3, 1, 2): (0.9, 0.2)}, r"^angle_ranges\[\(3, 1, 2\)\]: need 0 <= lo"),
+        ({(3, 2, 2): (0.2, 0.9)}, r"^angle_ranges\[\(3, 2, 2\)\]: needs a non-root joint"),
+        ({(0, 1, 2): (0.2, 0.9)}, r"^angle_ranges\[\(0, 1, 2\)\]: needs a non-root joint"),
+        ({(3, 1, J): (0.2, 0.9)}, r"^angle_ranges\[\(3, 1, \d+\)\]: needs a non-root joint"),
+        ({(3, 1): (0.2, 0.9)}, r"^angle_ranges: expected \(joint, a, b\) keys"),
+        ([((3, 1, 2), (0.2, 0.9))], r"^angle_ranges: expected a mapping"),
+    ]
+    for ranges, message in bad_ranges:
+        with pytest.raises(ValueError, match=message):
+            sk.with_angle_ranges(ranges)  # type: ignore[arg-type]
     with pytest.raises(ValueError, match=r"^quantiles"):
-        sc.learn_bend_ranges(scene.P, sk.parents, quantiles=(0.9, 0.1))
+        sc.learn_angle_ranges(scene.P, sk.parents, quantiles=(0.9, 0.1))
     with pytest.raises(ValueError, match=r"^positions: expected shape"):
-        sc.learn_bend_ranges(scene.P[:, :3], sk.parents)
+        sc.learn_angle_ranges(scene.P[:, :3], sk.parents)
+    with pytest.raises(ValueError, match=r"^bone: expected two joint indices"):
+        sc.bone_angles(scene.P, (0, J), (0, 1))
 
 
-def test_the_skeleton_gives_each_joint_its_bend_range() -> None:
+def test_the_sibling_prior_keeps_the_hip_on_the_pelvis() -> None:
+    # CMU 131_01 walking (frames 0, 2, …, 118), Fig 4.3(c) conditions. RightHip (η_a 1.30)
+    # hangs off the root like LeftHip: both bones are fixed in the pelvis, so their angle is
+    # constant (68.3° over the other trial). Without a prior the whole window follows the
+    # impostor side (errors 0.72 0.74 0.73 0.67 on seeds 0–3); with LeftHip given 5 % of its
+    # bone off and the angle range learned from the other trial (131_02's four clips):
+    # 0.09 0.05 0.07 0.03.
+    P, skeleton, keep, cams, px = _clip_window("cmu_131_01_walk300.bvh")
+    ranges = _trial_ranges("02", skeleton, keep, bend=False)
+    F = P.shape[0]
+    j, s = skeleton.index("RightHip"), skeleton.index("LeftHip")
+    p = skeleton.parents[j]
+    assert skeleton.parents[s] == p == skeleton.root
+    lo, hi = ranges[j, p, s]
+    assert hi - lo < np.radians(1.0)  # rigid in the capture
+    errs: dict[bool, list[float]] = {True: [], False: []}
+    for seed in range(4):
+        x, parent, r, den = _fig43c_draw(P, px, j, p, seed)
+        rs = float(np.linalg.norm(P[:, s] - P[:, p], axis=1).mean())
+        rng = np.random.default_rng(seed * 1000 + 17 * j + 6 + s)
+        sibling = P[:, s] + _smooth_offset(F, 0.05 * rs, rng)
+        kids = _fig43c_children(P, px, skeleton, j, seed)
+        for on in (True, False):
+            prior = [(sibling - parent, (lo, hi))] if on else None
+            out = sc.reconstruct_articulated(
+                x, cams, parent, 1.05 * r, k=8, children=kids, angle_priors=prior
+            )
+            errs[on].append(float(np.linalg.norm(out.points - P[:, j]) / den))
+    assert max(errs[True]) < 0.2, errs
+    assert min(errs[False]) > 0.5, errs  # the impostor this prior is here for
+
+
+def test_the_skeleton_gives_each_joint_its_angle_priors() -> None:
     # The 131_02 stop window, whole skeleton from the true root at exact lengths, 1 px, the
-    # ranges of the other trial: each joint with a grandparent gets its range and its
-    # reconstructed grandparent. At bend_weight 0 the result is the skeleton's without
-    # ranges. Mean joint error (metres, every joint, seeds 0–2) measured: without 0.0329,
-    # 0.0454, 0.0323; with the ranges 0.0331, 0.0455, 0.0258; with every range moved up by
-    # 40° (a wrong prior) 0.102, 0.081, 0.145.
-    m = load_bvh(DATA / "mocap" / "cmu_131_02_stop300.bvh")
-    skeleton, keep = sc.Skeleton.from_bvh(m)
-    P = m.positions[0::2][:60][:, keep]
-    cams, px = _orbit(P, P.mean(axis=1))
+    # bend and sibling ranges of the other trial: each joint gets the priors whose reference
+    # joints are reconstructed before it. At angle_weight 0 the result is the skeleton's
+    # without priors. Mean joint error (metres, every joint, seeds 0–2) measured: without
+    # 0.0330 0.0454 0.0323; with the priors 0.0331 0.0467 0.0353 (at exact lengths and a
+    # true root this window has no flip for them to mend; a reconstructed ancestor off by a
+    # few centimetres makes a prior a little wrong); with every range moved up by 40° (a wrong
+    # prior) 0.162 0.086 0.189.
+    P, skeleton, keep, cams, px = _clip_window("cmu_131_02_stop300.bvh")
     F, J = P.shape[:2]
     ranges = _trial_ranges("01", skeleton, keep)
+    up = np.radians(40.0)
+    wrong = {k: (min(lo + up, np.pi), min(hi + up, np.pi)) for k, (lo, hi) in ranges.items()}
     root = P[:, skeleton.root]
     errs: dict[str, list[float]] = {"plain": [], "on": [], "wrong": []}
     for seed in range(3):
         x = px + np.random.default_rng(seed).normal(0, 1.0, (F, J, 2))
         runs = {
             "plain": sc.reconstruct_skeleton(x, cams, skeleton, root, k=8),
-            "on": sc.reconstruct_skeleton(x, cams, skeleton.with_bend_ranges(ranges), root, k=8),
-            "wrong": sc.reconstruct_skeleton(
-                x,
-                cams,
-                skeleton.with_bend_ranges(np.clip(ranges + np.radians(40.0), 0.0, np.pi)),
-                root,
-                k=8,
-            ),
+            "on": sc.reconstruct_skeleton(x, cams, skeleton.with_angle_ranges(ranges), root, k=8),
+            "wrong": sc.reconstruct_skeleton(x, cams, skeleton.with_angle_ranges(wrong), root, k=8),
         }
         for key, rec in runs.items():
             errs[key].append(float(np.linalg.norm(rec.points - P, axis=2).mean()))
         if seed == 0:
             off = sc.reconstruct_skeleton(
-                x, cams, skeleton.with_bend_ranges(ranges), root, k=8, bend_weight=0.0
+                x, cams, skeleton.with_angle_ranges(ranges), root, k=8, angle_weight=0.0
             )
             np.testing.assert_array_equal(runs["plain"].points, off.points)
-    plain, on, wrong = (float(np.mean(errs[k])) for k in ("plain", "on", "wrong"))
-    assert on <= plain + 0.002, errs
-    assert wrong > 1.5 * plain, errs  # the ranges reach the joints
+    plain, on, bad = (float(np.mean(errs[k])) for k in ("plain", "on", "wrong"))
+    assert on <= 1.1 * plain, errs
+    assert bad > 1.5 * plain, errs  # the ranges reach the joints

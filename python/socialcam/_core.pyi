@@ -250,12 +250,12 @@ def reconstruct_articulated(
     length: float,
     options: Any,
     children: list[tuple[_F64, float]] = ...,
-    bend: tuple[_F64, float, float] | None = None,
+    angle_priors: list[tuple[_F64, float, float]] = ...,
 ) -> dict[str, Any]:
     """One articulated trajectory from ``x (F,2)`` (NaN = missing) and ``parent (F,3)``;
     ``options`` is an ``ArticulatedOptions`` (its fields are read); ``children``: the
-    joint's children as ``(x_c (F,2), bone length)``; ``bend``: a bend prior as
-    ``(grandparent (F,3), lo, hi)``, radians. A dict with ``X (F,3)``,
+    joint's children as ``(x_c (F,2), bone length)``; ``angle_priors``: priors on the
+    joint's bone as ``(reference bones (F,3), lo, hi)``, radians. A dict with ``X (F,3)``,
     ``radius``, ``bqp_radius``, ``coeffs_theta``/``coeffs_phi (K,)``, ``bqp_size``,
     ``bqp_objective``, ``bqp_gap``, ``bqp_nodes``, ``bqp_optimal``, ``n_observed``,
     ``reprojection_rms``, ``lm_iterations``, ``converged``."""
@@ -270,11 +270,11 @@ def reconstruct_skeleton(
     root: _F64,
     times: _F64,
     options: Any,
-    bend_ranges: list[tuple[float, float] | None] | None = None,
+    angle_ranges: list[tuple[int, int, int, float, float]] = ...,
 ) -> tuple[_F64, list[dict[str, Any] | None]]:
     """Whole skeleton from ``x (F,J,2)`` and ``root (F,3)``: ``X (F,J,3)`` and one dict per
-    joint as in :func:`reconstruct_articulated` (``None`` for the root); ``bend_ranges``:
-    per joint ``(lo, hi)`` radians or ``None``."""
+    joint as in :func:`reconstruct_articulated` (``None`` for the root); ``angle_ranges``:
+    ``(joint, a, b, lo, hi)`` priors on the angle between ``joint``'s bone and ``a → b``."""
 
 def skeleton_order(parents: list[int], lengths: list[float]) -> list[int]:
     """Validates a tree (``-1`` = root) and returns a parents-first joint order."""

@@ -11,7 +11,7 @@ the root outwards (Eq 4.6).
 from __future__ import annotations
 
 import dataclasses
-from collections.abc import Sequence
+from collections.abc import Mapping, Sequence
 from dataclasses import dataclass, field, fields, replace
 from typing import Any
 
@@ -38,8 +38,8 @@ __all__ = [
     "SkeletonReconstruction",
     "articulated_bqp",
     "articulated_reconstructability",
-    "bend_angles",
-    "learn_bend_ranges",
+    "bone_angles",
+    "learn_angle_ranges",
     "reconstruct_articulated",
     "reconstruct_skeleton",
     "solve_bqp",
@@ -334,16 +334,17 @@ class ArticulatedOptions:
         the bench's CMU windows it lowers the Fig 4.3(c) mean error by 2–5 % and leaves
         the error at exact length and root unchanged, but on one test scene (131_01) it
         raises the median.
-    bend_weight : robust method, with a bend prior (``grandparent`` and ``bend_range`` of
-        :func:`reconstruct_articulated`, or ``Skeleton.bend_ranges``): weight of the prior in
-        the same score, ``bend_weight × mean_t (e_t / bend_tolerance)²``, ``e_t`` the angle by
-        which the start's bend (the angle between the joint's bone and its parent's bone) at
-        frame ``t`` leaves the range; ≥ 0, 0 ignores the prior. At 1, a start outside the
-        range by one tolerance at every frame scores as if it fitted the pixels one standard
-        deviation worse.
-    bend_tolerance : robust method, with a bend prior: the angle, radians (> 0; default 5°),
-        by which a bend outside the range counts as one unit. The bend computed from a parent
-        and grandparent a few percent of their bones off is itself off by several degrees.
+    angle_weight : robust method, with angle priors (``angle_priors`` of
+        :func:`reconstruct_articulated`, or ``Skeleton.angle_ranges``): weight of each prior in
+        the same score, ``angle_weight × mean_t (e_t / angle_tolerance)²``, ``e_t`` the angle
+        by which the start's bone at frame ``t`` leaves the prior's range of angles to its
+        reference bone; ≥ 0, 0 ignores the priors. At 1, a start outside a range by one
+        tolerance at every frame scores as if it fitted the pixels one standard deviation
+        worse.
+    angle_tolerance : robust method, with angle priors: the angle, radians (> 0; default
+        5°), by which a bone outside a range counts as one unit. The angle computed from a
+        parent and reference joints a few percent of their bones off is itself off by
+        several degrees.
     max_iter : Levenberg–Marquardt iterations of the refinement (≥ 1).
     time_limit : seconds per binary program (the best incumbent is used after it), or
         ``None``.
@@ -365,8 +366,8 @@ class ArticulatedOptions:
     child_slack: float = 0.1
     length_weight: float = 0.0
     average_starts: bool = False
-    bend_weight: float = 1.0
-    bend_tolerance: float = float(np.radians(5.0))
+    angle_weight: float = 1.0
+    angle_tolerance: float = float(np.radians(5.0))
     max_iter: int = 100
     time_limit: float | None = None
     node_limit: int | None = DEFAULT_NODE_LIMIT
@@ -386,9 +387,9 @@ class ArticulatedOptions:
         check_int(self.refine_k_max, "refine_k_max", min=0, max=10_000)
         check_float(self.child_slack, "child_slack", min=0.0, max=1e6)
         check_float(self.length_weight, "length_weight", min=0.0, max=1e6)
-        check_float(self.bend_weight, "bend_weight", min=0.0, max=1e6)
+        check_float(self.angle_weight, "angle_weight", min=0.0, max=1e6)
         check_float(
-            self.bend_tolerance, "bend_tolerance", min=0.0, max=float(np.pi), min_exclusive=True
+            self.angle_tolerance, "angle_tolerance", min=0.0, max=float(np.pi), min_exclusive=True
         )
         check_int(self.max_iter, "max_iter", min=1, max=100_000)
         if self.time_limit is not None:
@@ -419,8 +420,7 @@ def reconstruct_articulated(
     length: float,
     *,
     children: Sequence[tuple[npt.ArrayLike, float]] | None = None,
-    grandparent: npt.ArrayLike | None = None,
-    bend_range: tuple[float, float] | None = None,
+    angle_priors: Sequence[tuple[npt.ArrayLike, tuple[float, float]]] | None = None,
     options: ArticulatedOptions | None = None,
     **overrides: Any,
 ) -> ArticulatedTrajectory:
@@ -438,13 +438,16 @@ def reconstruct_articulated(
         missing; bone length from this joint in metres)`` each. The robust method rejects
         starts that leave a child's ray out of its reach (``child_slack``); the thesis
         method ignores them.
-    grandparent, bend_range : a prior on how the joint bends (not in the thesis): the
-        parent's parent, (F, 3) metres, and ``(lo, hi)`` radians within [0, π], the range
-        of the angle between the joint's bone and the parent's bone (e.g. learned from motion
-        capture with :func:`learn_bend_ranges`). The robust method scores each start's
-        excess beyond the range (``bend_weight``, ``bend_tolerance``): where the pixels and
-        smoothness cannot tell the two roots of a ray apart, the impostor side often bends
-        the body where it does not bend. Both or neither.
+    angle_priors : priors on the joint's bone (not in the thesis): ``(reference (F, 3) bone
+        vectors in metres, (lo, hi) radians within [0, π])`` each: at every frame the angle
+        between the bone (parent → joint) and the reference bone lies in the range. With a
+        kinematic tree, the parent's bone (``parent − grandparent``) bounds how the joint
+        bends and a sibling's bone (``sibling − parent``) keeps two bones of one rigid
+        segment (pelvis, thorax) at their angle; learn the ranges from motion capture with
+        :func:`learn_angle_ranges`. The robust method scores each start's excess beyond the
+        ranges (``angle_weight``, ``angle_tolerance``): where the pixels and smoothness
+        cannot tell the two roots of a ray apart, the impostor side often puts the bone
+        where the body does not.
     options : :class:`ArticulatedOptions`; ``overrides`` replace some of its fields
         (e.g. ``k=10, method="thesis"``).
 
@@ -473,21 +476,25 @@ def reconstruct_articulated(
                 check_float(lc, f"children[{c}] length", min=0.0, min_exclusive=True),
             )
         )
-    if (grandparent is None) != (bend_range is None):
-        raise ValueError("grandparent, bend_range: give both (a bend prior) or neither")
-    bend = None
-    if grandparent is not None and bend_range is not None:
-        g_ = as_float_array(grandparent, "grandparent", (f, 3))
-        lo, hi = _bend_range(bend_range, "bend_range")
-        bend = (g_, lo, hi)
+    if isinstance(angle_priors, (str, bytes, np.ndarray)):
+        raise ValueError("angle_priors: expected a sequence of (reference (F, 3), (lo, hi)) pairs")
+    priors = []
+    for i, prior in enumerate(angle_priors or ()):
+        if not isinstance(prior, (tuple, list)) or len(prior) != 2:
+            raise ValueError(
+                f"angle_priors[{i}]: expected a (reference (F, 3), (lo, hi) radians) pair"
+            )
+        ref = as_float_array(prior[0], f"angle_priors[{i}] reference", (f, 3))
+        lo, hi = _angle_range(prior[1], f"angle_priors[{i}] range")
+        priors.append((ref, lo, hi))
     t = _times(cameras)
     d = _core.reconstruct_articulated(
-        cameras.K, cameras.R, cameras.C, x_, p_, t, length_, opts, kids, bend
+        cameras.K, cameras.R, cameras.C, x_, p_, t, length_, opts, kids, priors
     )
     return _traj(d, t)
 
 
-def _bend_range(r: object, name: str) -> tuple[float, float]:
+def _angle_range(r: object, name: str) -> tuple[float, float]:
     """``(lo, hi)`` radians, checked."""
     v = np.asarray(r, dtype=float) if not isinstance(r, (str, bytes)) else None
     if v is None or v.shape != (2,):
@@ -577,23 +584,26 @@ class Skeleton:
     names : joint names, length ``J``.
     parents : (J,) parent index per joint, ``-1`` for the single root.
     lengths : (J,) bone length from the parent, metres (ignored for the root).
-    bend_ranges : optional (J, 2) ``(lo, hi)`` radians per joint, the range of the angle
-        between the joint's bone and its parent's bone (a NaN row = no prior; the rows of the
-        root and of its children are ignored: they have no parent bone), e.g. from
-        :func:`learn_bend_ranges`. :func:`reconstruct_skeleton` gives each joint its range
-        with its reconstructed grandparent (``bend_weight`` of :class:`ArticulatedOptions`).
+    angle_ranges : optional priors between bones, ``{(joint, a, b): (lo, hi)}`` radians:
+        the angle between the bone of ``joint`` (its parent → it) and the bone ``a → b``
+        lies in ``[lo, hi]`` — ``(grandparent, parent)`` bounds how the joint bends,
+        ``(parent, sibling)`` keeps two bones of one segment at their angle. Learn them with
+        :func:`learn_angle_ranges`. :func:`reconstruct_skeleton` gives each joint the priors
+        whose ``a`` and ``b`` are reconstructed before it (``angle_weight`` of
+        :class:`ArticulatedOptions`).
 
     Raises
     ------
     ValueError
         Not a tree (no or several roots, a cycle, a parent out of range), a non-positive
-        bone length, a bend range outside 0 ≤ lo ≤ hi ≤ π.
+        bone length, an angle prior on the root, on joints out of range or outside
+        0 ≤ lo ≤ hi ≤ π.
     """
 
     names: tuple[str, ...]
     parents: tuple[int, ...]
     lengths: FloatArray
-    bend_ranges: FloatArray | None
+    angle_ranges: tuple[tuple[int, int, int, float, float], ...]
     order: tuple[int, ...] = field(init=False)
 
     def __init__(
@@ -601,7 +611,7 @@ class Skeleton:
         names: Sequence[str],
         parents: Sequence[int],
         lengths: npt.ArrayLike,
-        bend_ranges: npt.ArrayLike | None = None,
+        angle_ranges: Mapping[tuple[int, int, int], tuple[float, float]] | None = None,
     ) -> None:
         names_ = tuple(str(n) for n in names)
         parents_ = tuple(int(p) for p in parents)
@@ -612,26 +622,30 @@ class Skeleton:
         # The root has no bone; the core ignores its entry.
         order = _core.skeleton_order(list(parents_), _bone_lengths(parents_, lengths_))
         lengths_.setflags(write=False)
-        ranges_ = None
-        if bend_ranges is not None:
-            ranges_ = np.array(as_float_array(bend_ranges, "bend_ranges", (j, 2), allow_nan=True))
-            for i, row in enumerate(ranges_):
-                if np.isnan(row).any():
-                    if not np.isnan(row).all():
-                        raise ValueError(f"bend_ranges: row {i} must be finite or entirely NaN")
-                    continue
-                _bend_range(row, f"bend_ranges[{i}]")
-            ranges_.setflags(write=False)
+        ranges_ = []
+        if angle_ranges is not None and not isinstance(angle_ranges, Mapping):
+            raise ValueError("angle_ranges: expected a mapping {(joint, a, b): (lo, hi)}")
+        for key, rng in (angle_ranges or {}).items():
+            if not (isinstance(key, tuple) and len(key) == 3):
+                raise ValueError(f"angle_ranges: expected (joint, a, b) keys, got {key!r}")
+            jt, a, b = (int(v) for v in key)
+            if not all(0 <= v < j for v in (jt, a, b)) or a == b or parents_[jt] == -1:
+                raise ValueError(
+                    f"angle_ranges[{key}]: needs a non-root joint and two distinct joints in 0..{j}"
+                )
+            ranges_.append((jt, a, b, *_angle_range(rng, f"angle_ranges[{key}]")))
         object.__setattr__(self, "names", names_)
         object.__setattr__(self, "parents", parents_)
         object.__setattr__(self, "lengths", lengths_)
-        object.__setattr__(self, "bend_ranges", ranges_)
+        object.__setattr__(self, "angle_ranges", tuple(ranges_))
         object.__setattr__(self, "order", tuple(order))
 
-    def with_bend_ranges(self, bend_ranges: npt.ArrayLike | None) -> Skeleton:
-        """The same tree with ``bend_ranges`` ((J, 2) radians, NaN rows = none; ``None``
-        removes them)."""
-        return Skeleton(self.names, self.parents, self.lengths, bend_ranges)
+    def with_angle_ranges(
+        self, angle_ranges: Mapping[tuple[int, int, int], tuple[float, float]] | None
+    ) -> Skeleton:
+        """The same tree with ``angle_ranges`` (see :class:`Skeleton`; ``None`` removes
+        them)."""
+        return Skeleton(self.names, self.parents, self.lengths, angle_ranges)
 
     @property
     def root(self) -> int:
@@ -718,7 +732,7 @@ def reconstruct_skeleton(
     ----------
     x : (F, J, 2) pixels of every joint (NaN rows missing).
     cameras : ``F`` cameras, one per frame.
-    skeleton : the tree, bone lengths and, optionally, bend ranges (a prior; see
+    skeleton : the tree, bone lengths and, optionally, angle priors between bones (see
         :class:`Skeleton`).
     root : (F, 3) root trajectory, metres.
     options, overrides : as in :func:`reconstruct_articulated`, for every joint.
@@ -732,11 +746,7 @@ def reconstruct_skeleton(
     r_ = as_float_array(root, "root", (f, 3))
     t = _times(cameras)
     lengths = _bone_lengths(skeleton.parents, skeleton.lengths)
-    ranges = None
-    if skeleton.bend_ranges is not None:
-        ranges = [
-            None if np.isnan(r).any() else (float(r[0]), float(r[1])) for r in skeleton.bend_ranges
-        ]
+    ranges = list(skeleton.angle_ranges)
     X, dicts = _core.reconstruct_skeleton(
         cameras.K, cameras.R, cameras.C, x_, list(skeleton.parents), lengths, r_, t, opts, ranges
     )
@@ -744,58 +754,62 @@ def reconstruct_skeleton(
     return SkeletonReconstruction(readonly(X), joints)
 
 
-def bend_angles(positions: npt.ArrayLike, parents: Sequence[int]) -> FloatArray:
-    """The bend of every joint in every frame: the angle, radians, between the joint's bone
-    (parent → joint) and its parent's bone (grandparent → parent).
+def bone_angles(
+    positions: npt.ArrayLike, bone: tuple[int, int], reference: tuple[int, int]
+) -> FloatArray:
+    """The angle, radians, between the bone ``bone = (a, b)`` (a → b) and the bone
+    ``reference = (c, d)`` (c → d) in every frame.
 
     Parameters
     ----------
     positions : (F, J, 3) joint positions, metres (e.g. motion capture).
-    parents : (J,) parent per joint, ``-1`` for the root (e.g. ``Skeleton.parents``).
+    bone, reference : pairs of joint indices.
 
     Returns
     -------
-    (F, J) radians in [0, π]; NaN for the root and its children (no parent bone) and where a bone has
-    no length.
+    (F,) radians in [0, π]; NaN where a bone has no length.
     """
-    parents_ = [int(p) for p in parents]
-    j = len(parents_)
-    P = as_float_array(positions, "positions", (None, j, 3))
-    out = np.full(P.shape[:2], np.nan)
-    for c, p in enumerate(parents_):
-        if p < -1 or p >= j:
-            raise ValueError(f"parents: joint {c} has parent {p}, out of range")
-        if p == -1 or parents_[p] == -1:
-            continue
-        a = P[:, c] - P[:, p]
-        b = P[:, p] - P[:, parents_[p]]
-        na, nb = np.linalg.norm(a, axis=1), np.linalg.norm(b, axis=1)
-        ok = (na > 0) & (nb > 0)
-        cos = np.einsum("ij,ij->i", a[ok], b[ok]) / (na[ok] * nb[ok])
-        out[ok, c] = np.arccos(np.clip(cos, -1.0, 1.0))
+    P = as_float_array(positions, "positions", (None, None, 3))
+    J = P.shape[1]
+    for name, pair in (("bone", bone), ("reference", reference)):
+        if len(pair) != 2 or not all(0 <= int(v) < J for v in pair):
+            raise ValueError(f"{name}: expected two joint indices in 0..{J}, got {pair!r}")
+    u = P[:, int(bone[1])] - P[:, int(bone[0])]
+    v = P[:, int(reference[1])] - P[:, int(reference[0])]
+    nu, nv = np.linalg.norm(u, axis=1), np.linalg.norm(v, axis=1)
+    out = np.full(P.shape[0], np.nan)
+    ok = (nu > 0) & (nv > 0)
+    cos = np.einsum("ij,ij->i", u[ok], v[ok]) / (nu[ok] * nv[ok])
+    out[ok] = np.arccos(np.clip(cos, -1.0, 1.0))
     return out
 
 
-def learn_bend_ranges(
+def learn_angle_ranges(
     positions: npt.ArrayLike | Sequence[npt.ArrayLike],
     parents: Sequence[int],
     *,
+    bend: bool = True,
+    siblings: bool = True,
     quantiles: tuple[float, float] = (0.0, 1.0),
     margin: float = 0.0,
-) -> FloatArray:
-    """Bend ranges for :class:`Skeleton` learned from motion capture.
+) -> dict[tuple[int, int, int], tuple[float, float]]:
+    """Angle priors for :class:`Skeleton` learned from motion capture.
 
     Parameters
     ----------
     positions : (F, J, 3) joint positions, metres, or a list of such clips (same joints).
     parents : (J,) parent per joint, ``-1`` for the root.
-    quantiles : the range's ends as quantiles of each joint's bend over every frame (the
-        default, min and max).
+    bend : learn ``(joint, grandparent, parent)``: the angle between each bone and its
+        parent's bone (how the joint bends).
+    siblings : learn ``(joint, parent, sibling)`` for every other child of the joint's
+        parent: on a rigid segment (pelvis, thorax) the angle is nearly constant.
+    quantiles : the range's ends as quantiles of the angle over every frame (the default,
+        min and max).
     margin : radians added on both sides (≥ 0), the range then clipped to [0, π].
 
     Returns
     -------
-    (J, 2) ``(lo, hi)`` radians; NaN rows for the root and its children.
+    ``{(joint, a, b): (lo, hi)}`` radians, for ``Skeleton(angle_ranges=...)``.
     """
     if isinstance(positions, (list, tuple)) and not positions:
         raise ValueError("positions: no clip given")
@@ -804,14 +818,30 @@ def learn_bend_ranges(
         if isinstance(positions, (list, tuple)) and np.ndim(positions[0]) == 3
         else [positions]
     )
+    parents_ = [int(p) for p in parents]
+    J = len(parents_)
+    clips = [as_float_array(c, "positions", (None, J, 3)) for c in clips]
+    for c, p in enumerate(parents_):
+        if p < -1 or p >= J or p == c:
+            raise ValueError(f"parents: joint {c} has parent {p}, out of range")
     q0, q1 = (check_float(q, "quantiles", min=0.0, max=1.0) for q in quantiles)
     if q0 > q1:
         raise ValueError(f"quantiles: need lo <= hi, got {quantiles}")
     m = check_float(margin, "margin", min=0.0, max=float(np.pi))
-    bends = np.concatenate([bend_angles(c, parents) for c in clips], axis=0)
-    out = np.full((bends.shape[1], 2), np.nan)
-    for c in range(bends.shape[1]):
-        v = bends[:, c][np.isfinite(bends[:, c])]
+    keys: list[tuple[int, int, int]] = []
+    for j, p in enumerate(parents_):
+        if p == -1:
+            continue
+        if bend and parents_[p] != -1:
+            keys.append((j, parents_[p], p))
+        if siblings:
+            keys += [(j, p, s) for s, ps in enumerate(parents_) if ps == p and s != j]
+    out: dict[tuple[int, int, int], tuple[float, float]] = {}
+    for j, a, b in keys:
+        v = np.concatenate([bone_angles(c, (parents_[j], j), (a, b)) for c in clips])
+        v = v[np.isfinite(v)]
         if v.size:
-            out[c] = np.clip([np.quantile(v, q0) - m, np.quantile(v, q1) + m], 0.0, np.pi)
+            lo = float(np.clip(np.quantile(v, q0) - m, 0.0, np.pi))
+            hi = float(np.clip(np.quantile(v, q1) + m, 0.0, np.pi))
+            out[j, a, b] = (lo, hi)
     return out

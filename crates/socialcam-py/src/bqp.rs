@@ -204,9 +204,9 @@ struct PyArticulatedOptions {
     #[pyo3(attribute)]
     average_starts: bool,
     #[pyo3(attribute)]
-    bend_weight: f64,
+    angle_weight: f64,
     #[pyo3(attribute)]
-    bend_tolerance: f64,
+    angle_tolerance: f64,
     #[pyo3(attribute)]
     max_iter: usize,
     #[pyo3(attribute)]
@@ -241,8 +241,8 @@ fn art_options(o: &PyArticulatedOptions) -> PyResult<ArticulatedOptions> {
         child_slack: o.child_slack,
         length_weight: o.length_weight,
         average_starts: o.average_starts,
-        bend_weight: o.bend_weight,
-        bend_tolerance: o.bend_tolerance,
+        angle_weight: o.angle_weight,
+        angle_tolerance: o.angle_tolerance,
         lm: socialcore::geometry::LmOptions {
             max_iterations: o.max_iter,
             ..defaults.lm
@@ -286,7 +286,7 @@ fn result_dict<'py>(
 
 /// One articulated trajectory (Eq 4.5–4.12); returns a dict (see `_core.pyi`).
 #[pyfunction]
-#[pyo3(signature = (k_mat, r_mat, c_mat, x, parent, times, length, options, children=Vec::new(), bend=None))]
+#[pyo3(signature = (k_mat, r_mat, c_mat, x, parent, times, length, options, children=Vec::new(), angle_priors=Vec::new()))]
 #[allow(clippy::too_many_arguments)]
 fn reconstruct_articulated<'py>(
     py: Python<'py>,
@@ -299,7 +299,7 @@ fn reconstruct_articulated<'py>(
     length: f64,
     options: Bound<'py, PyAny>,
     children: Vec<(PyReadonlyArray2<'py, f64>, f64)>,
-    bend: Option<(PyReadonlyArray2<'py, f64>, f64, f64)>,
+    angle_priors: Vec<(PyReadonlyArray2<'py, f64>, f64, f64)>,
 ) -> PyResult<Bound<'py, pyo3::types::PyDict>> {
     let options: PyArticulatedOptions = crate::convert::options(&options, "ArticulatedOptions")?;
     let cams = cameras(&k_mat, &r_mat, &c_mat)?;
@@ -318,23 +318,26 @@ fn reconstruct_articulated<'py>(
             })
         })
         .collect::<PyResult<Vec<_>>>()?;
-    // (grandparent (F, 3), lo, hi), the range in radians.
-    let bend = bend
-        .map(|(g, lo, hi)| points(&g, "grandparent", f).map(|g| (g, lo, hi)))
-        .transpose()?;
+    // (reference bones (F, 3), lo, hi), the range in radians.
+    let priors = angle_priors
+        .iter()
+        .enumerate()
+        .map(|(i, (b, lo, hi))| {
+            Ok(art::AnglePrior {
+                reference: points(b, &format!("angle_priors[{i}] reference"), f)?,
+                range: (*lo, *hi),
+            })
+        })
+        .collect::<PyResult<Vec<_>>>()?;
     let r = detach(py, || {
-        let prior = bend.as_ref().map(|(g, lo, hi)| art::BendPrior {
-            grandparent: g,
-            range: (*lo, *hi),
-        });
-        art::reconstruct_articulated_prior(&cams, &px, &par, &t, length, &kids, prior, &opts)
+        art::reconstruct_articulated_prior(&cams, &px, &par, &t, length, &kids, &priors, &opts)
     })?;
     result_dict(py, r)
 }
 
 /// Whole skeleton from its root (Eq 4.6): `(X (F,J,3), [dict or None per joint])`.
 #[pyfunction]
-#[pyo3(signature = (k_mat, r_mat, c_mat, x, parents, lengths, root, times, options, bend_ranges=None))]
+#[pyo3(signature = (k_mat, r_mat, c_mat, x, parents, lengths, root, times, options, angle_ranges=Vec::new()))]
 #[allow(clippy::too_many_arguments)]
 fn reconstruct_skeleton<'py>(
     py: Python<'py>,
@@ -347,16 +350,22 @@ fn reconstruct_skeleton<'py>(
     root: PyReadonlyArray2<'py, f64>,
     times: PyReadonlyArray1<'py, f64>,
     options: Bound<'py, PyAny>,
-    bend_ranges: Option<Vec<Option<(f64, f64)>>>,
+    angle_ranges: Vec<(usize, usize, usize, f64, f64)>,
 ) -> PyResult<(
     Bound<'py, PyArray3<f64>>,
     Vec<Option<Bound<'py, pyo3::types::PyDict>>>,
 )> {
     let options: PyArticulatedOptions = crate::convert::options(&options, "ArticulatedOptions")?;
-    let mut sk = skeleton(parents, lengths)?;
-    if let Some(ranges) = bend_ranges {
-        sk = map(sk.with_bend_ranges(ranges))?;
-    }
+    let ranges = angle_ranges
+        .into_iter()
+        .map(|(joint, from, to, lo, hi)| art::AngleRange {
+            joint,
+            from,
+            to,
+            range: (lo, hi),
+        })
+        .collect();
+    let sk = map(skeleton(parents, lengths)?.with_angle_ranges(ranges))?;
     let cams = cameras(&k_mat, &r_mat, &c_mat)?;
     let f = cams.len();
     let nj = sk.n_joints();

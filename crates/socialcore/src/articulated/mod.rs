@@ -76,15 +76,16 @@ pub const MOTION_WEIGHT: f64 = 2.0;
 /// it is not on by default.
 pub const LENGTH_WEIGHT: f64 = 20.0;
 
-/// Default of [`ArticulatedOptions::bend_weight`]: a start that leaves the bend range by
-/// one [`ArticulatedOptions::bend_tolerance`] at every frame scores as if it fitted the
-/// pixels worse by this many standard deviations of the cost (see [`BendPrior`]).
-pub const BEND_WEIGHT: f64 = 1.0;
+/// Default of [`ArticulatedOptions::angle_weight`]: a start outside an [`AnglePrior`]'s
+/// range by one [`ArticulatedOptions::angle_tolerance`] at every frame scores as if it
+/// fitted the pixels worse by this many standard deviations of the cost.
+pub const ANGLE_WEIGHT: f64 = 1.0;
 
-/// Default of [`ArticulatedOptions::bend_tolerance`], radians (5°): the bend of a joint
-/// computed from a parent and grandparent a few percent of their bones off turns by several
-/// degrees, so a start only counts as leaving the range by whole multiples of this.
-pub const BEND_TOLERANCE: f64 = 5.0 * std::f64::consts::PI / 180.0;
+/// Default of [`ArticulatedOptions::angle_tolerance`], radians (5°): the angle between a
+/// joint's bone and a reference bone computed from a parent and reference joints a few
+/// percent of their bones off is itself off by several degrees, so a start only counts as
+/// leaving the range by whole multiples of this.
+pub const ANGLE_TOLERANCE: f64 = 5.0 * std::f64::consts::PI / 180.0;
 
 /// Roughness (Eq 4.12 on the refined unit directions) below which two starts count as
 /// equally smooth: keeps the logarithm finite for trajectories inside the basis.
@@ -182,14 +183,14 @@ pub struct ArticulatedOptions {
     /// error by 2–5 % and leaves the exact-length error unchanged, but raises the median
     /// on one test scene.
     pub average_starts: bool,
-    /// Robust method, with a [`BendPrior`]: weight of the prior in the selection score,
-    /// `+ bend_weight · mean_t (e_t / bend_tolerance)²`, `e_t` the angle by which the
-    /// start's bend at frame `t` leaves the prior's range ([`BEND_WEIGHT`]); ≥ 0, 0 ignores
-    /// the prior.
-    pub bend_weight: f64,
-    /// Robust method, with a [`BendPrior`]: the angle (radians, > 0) by which a bend
-    /// outside the range counts as one unit ([`BEND_TOLERANCE`]).
-    pub bend_tolerance: f64,
+    /// Robust method, with [`AnglePrior`]s: weight of each prior in the selection score,
+    /// `+ angle_weight · mean_t (e_t / angle_tolerance)²`, `e_t` the angle by which the
+    /// start's bone at frame `t` leaves the prior's range ([`ANGLE_WEIGHT`]); ≥ 0, 0 ignores
+    /// the priors.
+    pub angle_weight: f64,
+    /// Robust method, with [`AnglePrior`]s: the angle (radians, > 0) by which a bone
+    /// outside a range counts as one unit ([`ANGLE_TOLERANCE`]).
+    pub angle_tolerance: f64,
 }
 
 impl Default for ArticulatedOptions {
@@ -214,8 +215,8 @@ impl Default for ArticulatedOptions {
             child_slack: CHILD_SLACK,
             length_weight: 0.0,
             average_starts: false,
-            bend_weight: BEND_WEIGHT,
-            bend_tolerance: BEND_TOLERANCE,
+            angle_weight: ANGLE_WEIGHT,
+            angle_tolerance: ANGLE_TOLERANCE,
         }
     }
 }
@@ -256,73 +257,86 @@ fn children_miss(
     total
 }
 
-/// A prior on how a joint bends: the angle between the joint's bone (parent → joint) and
-/// its parent's bone (grandparent → parent) lies in `range` (radians, `0 ≤ lo ≤ hi ≤ π`).
+/// A prior on the joint's bone: at every frame `t` the angle between the bone
+/// `X_t − parent_t` and the reference bone `reference[t]` lies in `range` (radians,
+/// `0 ≤ lo ≤ hi ≤ π`).
 ///
 /// The two roots of a viewing ray on the parent's sphere (Fig 4.2(a)) fit the pixels alike,
 /// and where neither the pixels nor smoothness (Eq 4.12) tell them apart the impostor side
-/// often bends the body where it does not bend: a spine folded backwards, a head bent
-/// onto the shoulder. The thesis has no such prior (its Sec 4.4 decides by smoothness
-/// alone). The range is learned from motion capture (e.g. the min and max over a clip of
-/// another trial); the robust method adds the start's mean squared excess beyond it, in
-/// units of [`ArticulatedOptions::bend_tolerance`], to its selection score. One angle per
-/// joint rather than a direction in a local frame: the frame of a given or reconstructed
-/// parent is a few percent of its bones off, which turns a local frame by 5–10° but the
-/// bend angle only by the angle error of the two bones.
-#[derive(Debug, Clone, Copy)]
-pub struct BendPrior<'a> {
-    /// Grandparent positions, metres, one per camera frame.
-    pub grandparent: &'a [Vector3<f64>],
+/// often puts the bone where the body does not: a spine folded backwards, a hip or a
+/// shoulder turned off the rigid pelvis or thorax. The thesis has no such prior (its Sec
+/// 4.4 decides by smoothness alone). Two references serve a kinematic tree: the parent's
+/// bone (`parent − grandparent`: how the joint bends) and a sibling's bone (`sibling −
+/// parent`: two bones on one rigid segment keep their angle). The ranges are learned from
+/// motion capture; the robust method adds each prior's mean squared excess beyond its
+/// range, in units of [`ArticulatedOptions::angle_tolerance`], to the start's selection
+/// score. An angle between two bones rather than a direction in a local frame: reference
+/// joints a few percent of their bones off turn a local frame by 5–10° but the angle only
+/// by the angle error of the two bones.
+#[derive(Debug, Clone, PartialEq)]
+pub struct AnglePrior {
+    /// The reference bone vector at every camera frame, metres.
+    pub reference: Vec<Vector3<f64>>,
     /// `(lo, hi)`, radians.
     pub range: (f64, f64),
 }
 
-/// The angle (radians) by which each frame's bend leaves `range`: the angle between
-/// `points[t] − parent[t]` and `parent[t] − grandparent[t]` below `lo` or above `hi`, 0
-/// inside (and where a bone has no length).
-pub fn bend_excess(
+/// The angle (radians) by which each frame's bone leaves `range`: the angle between
+/// `points[t] − parent[t]` and `reference[t]` below `lo` or above `hi`, 0 inside (and where
+/// a bone has no length).
+pub fn angle_excess(
     points: &[Vector3<f64>],
     parent: &[Vector3<f64>],
-    grandparent: &[Vector3<f64>],
+    reference: &[Vector3<f64>],
     range: (f64, f64),
 ) -> Vec<f64> {
     points
         .iter()
-        .zip(parent.iter().zip(grandparent))
-        .map(|(x, (p, g))| {
-            let (a, b) = (x - p, p - g);
+        .zip(parent.iter().zip(reference))
+        .map(|(x, (p, b))| {
+            let a = x - p;
             let (na, nb) = (a.norm(), b.norm());
             if !(na > 0.0 && nb > 0.0) {
                 return 0.0;
             }
-            let angle = (a.dot(&b) / (na * nb)).clamp(-1.0, 1.0).acos();
+            let angle = (a.dot(b) / (na * nb)).clamp(-1.0, 1.0).acos();
             (range.0 - angle).max(angle - range.1).max(0.0)
         })
         .collect()
 }
 
-fn validate_bend(bend: &BendPrior<'_>, frames: usize, name: &str) -> Result<()> {
-    if bend.grandparent.len() != frames {
+fn valid_range((lo, hi): (f64, f64)) -> bool {
+    lo.is_finite() && hi.is_finite() && 0.0 <= lo && lo <= hi && hi <= std::f64::consts::PI
+}
+
+fn validate_prior(prior: &AnglePrior, index: usize, frames: usize) -> Result<()> {
+    let name = "angle_priors";
+    if prior.reference.len() != frames {
         return Err(Error::invalid(
             name,
             format!(
-                "need one grandparent position per camera frame ({frames}), got {}",
-                bend.grandparent.len()
+                "prior {index}: need one reference bone per camera frame ({frames}), got {}",
+                prior.reference.len()
             ),
         ));
     }
-    if bend
-        .grandparent
+    if prior
+        .reference
         .iter()
         .any(|g| !g.iter().all(|v| v.is_finite()))
     {
-        return Err(Error::invalid(name, "grandparent positions must be finite"));
-    }
-    let (lo, hi) = bend.range;
-    if !(lo.is_finite() && hi.is_finite() && 0.0 <= lo && lo <= hi && hi <= std::f64::consts::PI) {
         return Err(Error::invalid(
             name,
-            format!("range must satisfy 0 ≤ lo ≤ hi ≤ π radians, got ({lo}, {hi})"),
+            format!("prior {index}: reference bones must be finite"),
+        ));
+    }
+    if !valid_range(prior.range) {
+        return Err(Error::invalid(
+            name,
+            format!(
+                "prior {index}: range must satisfy 0 ≤ lo ≤ hi ≤ π radians, got {:?}",
+                prior.range
+            ),
         ));
     }
     Ok(())
@@ -789,9 +803,9 @@ pub(crate) struct StartEvidence {
     pub children: f64,
     /// Refined bone length, metres.
     pub radius: f64,
-    /// Score of the bend prior ([`BendPrior`]): `bend_weight · mean_t (e_t / tolerance)²`
-    /// (0 without a prior).
-    pub bend: f64,
+    /// Score of the angle priors ([`AnglePrior`]): `angle_weight · Σ_priors mean_t (e_t /
+    /// tolerance)²` (0 without a prior).
+    pub angle: f64,
 }
 
 /// Weights of the selection score: `(smooth_weight, motion_weight, length_weight)`.
@@ -882,7 +896,7 @@ pub(crate) fn start_scores_at(
             + log(e.roughness, smooth)
             + log(e.motion, motion)
             + longer(e.radius)
-            + e.bend;
+            + e.angle;
         if e.roughness.is_nan() || e.motion.is_nan() || s.is_nan() {
             f64::INFINITY
         } else {
@@ -979,12 +993,13 @@ pub fn reconstruct_articulated_with(
     children: &[ChildObservations],
     opts: &ArticulatedOptions,
 ) -> Result<ArticulatedResult> {
-    reconstruct_articulated_prior(cameras, pixels, parent, times, length, children, None, opts)
+    reconstruct_articulated_prior(cameras, pixels, parent, times, length, children, &[], opts)
 }
 
-/// [`reconstruct_articulated_with`] with a prior on the joint's bend ([`BendPrior`]): the
-/// robust method adds `bend_weight · mean_t (e_t / bend_tolerance)²` to each start's
-/// selection score; the thesis method ignores it.
+/// [`reconstruct_articulated_with`] with priors on the angle between the joint's bone and
+/// reference bones ([`AnglePrior`]): the robust method adds `angle_weight · mean_t (e_t /
+/// angle_tolerance)²` per prior to each start's selection score; the thesis method ignores
+/// them.
 #[allow(clippy::too_many_arguments)]
 pub fn reconstruct_articulated_prior(
     cameras: &[Camera],
@@ -993,17 +1008,17 @@ pub fn reconstruct_articulated_prior(
     times: &[f64],
     length: f64,
     children: &[ChildObservations],
-    bend: Option<BendPrior<'_>>,
+    priors: &[AnglePrior],
     opts: &ArticulatedOptions,
 ) -> Result<ArticulatedResult> {
     validate_common(cameras, pixels, parent, times, length)?;
-    if let Some(b) = &bend {
-        validate_bend(b, cameras.len(), "bend")?;
+    for (i, prior) in priors.iter().enumerate() {
+        validate_prior(prior, i, cameras.len())?;
     }
-    if !(opts.bend_tolerance.is_finite() && opts.bend_tolerance > 0.0) {
+    if !(opts.angle_tolerance.is_finite() && opts.angle_tolerance > 0.0) {
         return Err(Error::invalid(
-            "bend_tolerance",
-            format!("must be positive and finite, got {}", opts.bend_tolerance),
+            "angle_tolerance",
+            format!("must be positive and finite, got {}", opts.angle_tolerance),
         ));
     }
     for (c, child) in children.iter().enumerate() {
@@ -1058,7 +1073,7 @@ pub fn reconstruct_articulated_prior(
         ("motion_weight", opts.motion_weight),
         ("child_slack", opts.child_slack),
         ("length_weight", opts.length_weight),
-        ("bend_weight", opts.bend_weight),
+        ("angle_weight", opts.angle_weight),
     ] {
         if !(w.is_finite() && w >= 0.0) {
             return Err(Error::invalid(
@@ -1179,17 +1194,21 @@ pub fn reconstruct_articulated_prior(
         } else {
             0.0
         };
-        let bend = match (&bend, robust && opts.bend_weight > 0.0) {
-            (Some(b), true) => {
-                let excess = bend_excess(&points, parent, b.grandparent, b.range);
-                opts.bend_weight
-                    * excess
-                        .iter()
-                        .map(|e| (e / opts.bend_tolerance).powi(2))
-                        .sum::<f64>()
-                    / f.max(1) as f64
-            }
-            _ => 0.0,
+        let angle: f64 = if robust && opts.angle_weight > 0.0 {
+            priors
+                .iter()
+                .map(|prior| {
+                    let excess = angle_excess(&points, parent, &prior.reference, prior.range);
+                    opts.angle_weight
+                        * excess
+                            .iter()
+                            .map(|e| (e / opts.angle_tolerance).powi(2))
+                            .sum::<f64>()
+                        / f.max(1) as f64
+                })
+                .sum()
+        } else {
+            0.0
         };
         StartEvidence {
             cost: *cost,
@@ -1197,7 +1216,7 @@ pub fn reconstruct_articulated_prior(
             motion: finite(motion),
             children: finite(children),
             radius: *r,
-            bend: finite(bend),
+            angle: finite(angle),
         }
     };
     for radius in radii {
@@ -1562,8 +1581,8 @@ mod tests;
 pub struct Skeleton {
     parents: Vec<Option<usize>>,
     lengths: Vec<f64>,
-    /// Per joint, the range of its bend ([`BendPrior`]), radians; `None` = no prior.
-    bend_ranges: Vec<Option<(f64, f64)>>,
+    /// Angle priors between bones ([`AngleRange`]).
+    angle_ranges: Vec<AngleRange>,
     /// Joints in an order where every parent precedes its children, root first.
     order: Vec<usize>,
 }
@@ -1632,48 +1651,44 @@ impl Skeleton {
             ));
         }
         Ok(Skeleton {
-            bend_ranges: vec![None; j],
+            angle_ranges: Vec::new(),
             parents,
             lengths,
             order,
         })
     }
 
-    /// The skeleton with a bend range per joint (radians, `0 ≤ lo ≤ hi ≤ π`; `None` = no
-    /// prior). A range on the root or on a child of the root is ignored (no grandparent).
-    pub fn with_bend_ranges(mut self, ranges: Vec<Option<(f64, f64)>>) -> Result<Self> {
-        if ranges.len() != self.parents.len() {
-            return Err(Error::invalid(
-                "bend_ranges",
-                format!(
-                    "expected one entry per joint ({}), got {}",
-                    self.parents.len(),
-                    ranges.len()
-                ),
-            ));
-        }
-        for (j, r) in ranges.iter().enumerate() {
-            if let Some((lo, hi)) = *r {
-                if !(lo.is_finite()
-                    && hi.is_finite()
-                    && 0.0 <= lo
-                    && lo <= hi
-                    && hi <= std::f64::consts::PI)
-                {
-                    return Err(Error::invalid(
-                        "bend_ranges",
-                        format!("joint {j}: need 0 ≤ lo ≤ hi ≤ π radians, got ({lo}, {hi})"),
-                    ));
-                }
+    /// The skeleton with angle priors between its bones ([`AngleRange`]): every index in
+    /// range, `from ≠ to`, the range within `0 ≤ lo ≤ hi ≤ π`.
+    pub fn with_angle_ranges(mut self, ranges: Vec<AngleRange>) -> Result<Self> {
+        let n = self.parents.len();
+        for (i, r) in ranges.iter().enumerate() {
+            if r.joint >= n || r.from >= n || r.to >= n {
+                return Err(Error::invalid(
+                    "angle_ranges",
+                    format!("entry {i}: joint index out of range 0..{n}: {r:?}"),
+                ));
+            }
+            if r.from == r.to || self.parents[r.joint].is_none() {
+                return Err(Error::invalid(
+                    "angle_ranges",
+                    format!("entry {i}: needs a non-root joint and two distinct reference joints: {r:?}"),
+                ));
+            }
+            if !valid_range(r.range) {
+                return Err(Error::invalid(
+                    "angle_ranges",
+                    format!("entry {i}: need 0 ≤ lo ≤ hi ≤ π radians, got {:?}", r.range),
+                ));
             }
         }
-        self.bend_ranges = ranges;
+        self.angle_ranges = ranges;
         Ok(self)
     }
 
-    /// Per joint, its bend range ([`Skeleton::with_bend_ranges`]).
-    pub fn bend_ranges(&self) -> &[Option<(f64, f64)>] {
-        &self.bend_ranges
+    /// The angle priors ([`Skeleton::with_angle_ranges`]).
+    pub fn angle_ranges(&self) -> &[AngleRange] {
+        &self.angle_ranges
     }
 
     pub fn n_joints(&self) -> usize {
@@ -1692,6 +1707,19 @@ impl Skeleton {
     pub fn root(&self) -> usize {
         self.order[0]
     }
+}
+
+/// An angle prior of a [`Skeleton`]: the angle between the bone of `joint` (its parent →
+/// it) and the bone `from → to` lies in `range` (radians). `from = grandparent, to =
+/// parent` bounds how the joint bends; `from = parent, to = sibling` the angle between two
+/// bones of one segment. [`reconstruct_skeleton`] uses it when `from` and `to` are
+/// reconstructed before `joint` (the root, or earlier in [`Skeleton::order`]).
+#[derive(Debug, Clone, Copy, PartialEq)]
+pub struct AngleRange {
+    pub joint: usize,
+    pub from: usize,
+    pub to: usize,
+    pub range: (f64, f64),
 }
 
 /// Positions `[frame][joint]` and one result per joint (`None` for the root).
@@ -1739,14 +1767,18 @@ pub fn reconstruct_skeleton(
                 length: skeleton.lengths()[c],
             })
             .collect();
-        let grand = skeleton.parents()[p].and_then(|g| traj[g].clone());
-        let bend = match (skeleton.bend_ranges()[j], grand.as_deref()) {
-            (Some(range), Some(g)) => Some(BendPrior {
-                grandparent: g,
-                range,
-            }),
-            _ => None,
-        };
+        let priors: Vec<AnglePrior> = skeleton
+            .angle_ranges()
+            .iter()
+            .filter(|r| r.joint == j)
+            .filter_map(|r| match (&traj[r.from], &traj[r.to]) {
+                (Some(a), Some(b)) => Some(AnglePrior {
+                    reference: a.iter().zip(b).map(|(a, b)| b - a).collect(),
+                    range: r.range,
+                }),
+                _ => None,
+            })
+            .collect();
         let res = reconstruct_articulated_prior(
             cameras,
             &px,
@@ -1754,7 +1786,7 @@ pub fn reconstruct_skeleton(
             times,
             skeleton.lengths()[j],
             &kids,
-            bend,
+            &priors,
             opts,
         )
         .map_err(|e| match e {

@@ -349,7 +349,7 @@ fn start_selection_trades_cost_against_smoothness() {
         let ev: Vec<StartEvidence> = starts
             .iter()
             .map(|&(cost, roughness)| StartEvidence {
-                bend: 0.0,
+                angle: 0.0,
                 cost,
                 roughness,
                 motion: 1.0,
@@ -369,7 +369,7 @@ fn start_selection_prefers_the_stiller_of_equal_starts() {
     // σ(cost) ≈ 12.9 px² as above. Default weights (1, 2): a start sweeping ten times less
     // angular variance may cost up to two standard deviations (25.8 px²) more.
     let ev = |cost: f64, roughness: f64, motion: f64| StartEvidence {
-        bend: 0.0,
+        angle: 0.0,
         cost,
         roughness,
         motion,
@@ -508,7 +508,7 @@ fn children_out_of_reach_outweigh_a_better_fit() {
     // Two starts alike but for 1 px² of fit: the one whose children are out of reach by
     // 100 px² loses; without children the better fit wins.
     let ev = |cost: f64, children: f64| StartEvidence {
-        bend: 0.0,
+        angle: 0.0,
         cost,
         roughness: 1e-3,
         motion: 1.0,
@@ -533,7 +533,7 @@ fn starts_are_averaged_by_the_exponential_of_their_score() {
     // and weighs e^λ (λ = AVERAGE_SHARPNESS) times as much as the first. The third never
     // counts (NaN motion).
     let ev = |cost: f64, motion: f64| StartEvidence {
-        bend: 0.0,
+        angle: 0.0,
         cost,
         roughness: 1e-3,
         motion,
@@ -586,7 +586,7 @@ fn of_starts_alike_the_shorter_bone_wins() {
     // the second fits 6 px² (about half a σ) worse with a 5 % shorter bone: with the
     // default length weight (20 · ln 1.05 ≈ 0.98 σ) it wins, without it the better fit.
     let ev = |cost: f64, radius: f64| StartEvidence {
-        bend: 0.0,
+        angle: 0.0,
         cost,
         roughness: 1e-3,
         motion: 1.0,
@@ -615,37 +615,37 @@ fn of_starts_alike_the_shorter_bone_wins() {
 }
 
 #[test]
-fn bend_excess_is_the_angle_outside_the_range() {
+fn angle_excess_is_the_angle_outside_the_range() {
     let deg = std::f64::consts::PI / 180.0;
-    let g = vec![Vector3::new(0.0, -1.0, 0.0); 3];
+    let reference = vec![Vector3::new(0.0, 1.0, 0.0); 3];
     let p = vec![Vector3::zeros(); 3];
-    // Straight on (0°), at right angles (90°), folded back (180°).
+    // Along the reference (0°), at right angles (90°), against it (180°).
     let x = vec![
         Vector3::new(0.0, 0.5, 0.0),
         Vector3::new(0.3, 0.0, 0.0),
         Vector3::new(0.0, -0.2, 0.0),
     ];
-    let e = bend_excess(&x, &p, &g, (10.0 * deg, 100.0 * deg));
+    let e = angle_excess(&x, &p, &reference, (10.0 * deg, 100.0 * deg));
     let want = [10.0 * deg, 0.0, 80.0 * deg];
     for (a, b) in e.iter().zip(want) {
         assert!((a - b).abs() < 1e-12, "{e:?}");
     }
-    // A bone without length bends nowhere.
-    let e = bend_excess(&p, &p, &g, (10.0 * deg, 20.0 * deg));
+    // A bone without length leaves no range.
+    let e = angle_excess(&p, &p, &reference, (10.0 * deg, 20.0 * deg));
     assert_eq!(e, vec![0.0; 3]);
 }
 
 #[test]
-fn the_bend_prior_outweighs_a_slightly_better_fit() {
+fn the_angle_prior_outweighs_a_slightly_better_fit() {
     // σ(cost) ≈ 12.9 px² (50 observations, k = 8). The impostor fits 6 px² better (half a
-    // σ) but bends out of the range: a bend score of 2 (out by 1.4 tolerances on average)
+    // σ) but leaves a prior's range: an angle score of 2 (out by 1.4 tolerances on average)
     // hands the selection to the start inside it; a score of 0.2 does not.
-    let ev = |cost: f64, bend: f64| StartEvidence {
+    let ev = |cost: f64, angle: f64| StartEvidence {
         cost,
         roughness: 1e-3,
         motion: 1.0,
         radius: 0.4,
-        bend,
+        angle,
         ..Default::default()
     };
     let w = Some((SMOOTH_WEIGHT, MOTION_WEIGHT, 0.0));
@@ -664,15 +664,14 @@ fn the_bend_prior_outweighs_a_slightly_better_fit() {
 }
 
 #[test]
-fn a_bend_prior_is_checked_and_ignored_at_weight_zero() {
+fn angle_priors_are_checked_and_ignored_at_weight_zero() {
     let s = scene(40, 0.4, 0.5, 3);
     let o = opts(6);
-    let grand: Vec<Vector3<f64>> = s
-        .parent
-        .iter()
-        .map(|p| p - Vector3::new(0.0, 0.3, 0.0))
-        .collect();
-    let run = |bend: Option<BendPrior<'_>>, o: &ArticulatedOptions| {
+    let prior = AnglePrior {
+        reference: vec![Vector3::new(0.0, 0.3, 0.0); s.cameras.len()],
+        range: (0.0, 0.2),
+    };
+    let run = |priors: &[AnglePrior], o: &ArticulatedOptions| {
         reconstruct_articulated_prior(
             &s.cameras,
             &s.pixels,
@@ -680,95 +679,77 @@ fn a_bend_prior_is_checked_and_ignored_at_weight_zero() {
             &s.times,
             s.length,
             &[],
-            bend,
+            priors,
             o,
         )
     };
-    let prior = BendPrior {
-        grandparent: &grand,
-        range: (0.0, 0.2),
-    };
-    let plain = run(None, &o).expect("plain");
+    let plain = run(&[], &o).expect("plain");
     let off = run(
-        Some(prior),
+        std::slice::from_ref(&prior),
         &ArticulatedOptions {
-            bend_weight: 0.0,
+            angle_weight: 0.0,
             ..o
         },
     )
     .expect("weight 0");
     assert_eq!(plain.points, off.points);
-    // With a weight the prior is read (whatever it selects, the call succeeds).
-    run(Some(prior), &o).expect("with the prior");
-    let bad = |b: BendPrior<'_>, o: &ArticulatedOptions, what: &str| match run(Some(b), o) {
+    // With a weight the priors are read (whatever they select, the call succeeds).
+    run(&[prior.clone(), prior.clone()], &o).expect("with the priors");
+    let bad = |b: AnglePrior, o: &ArticulatedOptions, what: &str| match run(&[b], o) {
         Err(Error::InvalidInput { arg, .. }) => assert!(arg == what, "{arg}"),
         other => panic!(
             "{what}: expected an error, got {:?}",
             other.map(|r| r.radius)
         ),
     };
-    bad(
-        BendPrior {
-            range: (0.3, 0.2),
-            ..prior
-        },
-        &o,
-        "bend",
-    );
-    bad(
-        BendPrior {
-            range: (0.0, 4.0),
-            ..prior
-        },
-        &o,
-        "bend",
-    );
-    bad(
-        BendPrior {
-            grandparent: &grand[1..],
-            ..prior
-        },
-        &o,
-        "bend",
-    );
-    let mut nan = grand.clone();
-    nan[3].x = f64::NAN;
-    bad(
-        BendPrior {
-            grandparent: &nan,
-            ..prior
-        },
-        &o,
-        "bend",
-    );
-    bad(
-        prior,
-        &ArticulatedOptions {
-            bend_tolerance: 0.0,
-            ..o
-        },
-        "bend_tolerance",
-    );
-    bad(
-        prior,
-        &ArticulatedOptions {
-            bend_weight: -1.0,
-            ..o
-        },
-        "bend_weight",
-    );
+    let with = |f: &dyn Fn(&mut AnglePrior)| {
+        let mut b = prior.clone();
+        f(&mut b);
+        b
+    };
+    bad(with(&|b| b.range = (0.3, 0.2)), &o, "angle_priors");
+    bad(with(&|b| b.range = (0.0, 4.0)), &o, "angle_priors");
+    bad(with(&|b| b.reference.truncate(5)), &o, "angle_priors");
+    bad(with(&|b| b.reference[3].x = f64::NAN), &o, "angle_priors");
+    let zero_tol = ArticulatedOptions {
+        angle_tolerance: 0.0,
+        ..o
+    };
+    bad(prior.clone(), &zero_tol, "angle_tolerance");
+    let negative = ArticulatedOptions {
+        angle_weight: -1.0,
+        ..o
+    };
+    bad(prior.clone(), &negative, "angle_weight");
 }
 
 #[test]
-fn skeleton_bend_ranges_are_checked() {
+fn skeleton_angle_ranges_are_checked() {
     let sk = Skeleton::new(vec![None, Some(0), Some(1)], vec![0.0, 0.4, 0.3]).expect("tree");
-    assert!(sk.clone().with_bend_ranges(vec![None, None]).is_err());
+    let r = |joint, from, to, range| AngleRange {
+        joint,
+        from,
+        to,
+        range,
+    };
     assert!(sk
         .clone()
-        .with_bend_ranges(vec![None, None, Some((0.5, 0.1))])
+        .with_angle_ranges(vec![r(2, 0, 3, (0.1, 0.5))])
+        .is_err());
+    assert!(sk
+        .clone()
+        .with_angle_ranges(vec![r(2, 1, 1, (0.1, 0.5))])
+        .is_err());
+    assert!(sk
+        .clone()
+        .with_angle_ranges(vec![r(0, 1, 2, (0.1, 0.5))])
+        .is_err());
+    assert!(sk
+        .clone()
+        .with_angle_ranges(vec![r(2, 0, 1, (0.5, 0.1))])
         .is_err());
     let ok = sk
-        .with_bend_ranges(vec![None, None, Some((0.1, 0.5))])
+        .with_angle_ranges(vec![r(2, 0, 1, (0.1, 0.5))])
         .expect("ranges");
-    assert_eq!(ok.bend_ranges()[2], Some((0.1, 0.5)));
+    assert_eq!(ok.angle_ranges()[0].range, (0.1, 0.5));
 }
