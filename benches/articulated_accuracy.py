@@ -300,6 +300,17 @@ def run_skeleton(
         if (top, c) in cache:
             continue
         x, _ = observed(w, c, noise, missing, seed)
+        # Angle priors from what is reconstructed already: the grandparent on the chain, and
+        # the siblings reconstructed for other chains from the same given root.
+        priors = []
+        ranges = ANGLE_RANGES.get(w.clip, {})
+        kinds = PRIOR_METHODS.get(method, ())
+        if "bend" in kinds and i + 2 < len(chain) and (c, chain[i + 2], pc) in ranges:
+            priors.append((cache[top, pc] - cache[top, chain[i + 2]], ranges[c, chain[i + 2], pc]))
+        if "siblings" in kinds:
+            for s_, ps in w.pairs:
+                if ps == pc and s_ != c and (top, s_) in cache and (c, pc, s_) in ranges:
+                    priors.append((cache[top, s_] - cache[top, pc], ranges[c, pc, s_]))
         cache[top, c] = reconstruct(
             w,
             c,
@@ -311,6 +322,7 @@ def run_skeleton(
             scale=scale,
             missing=missing,
             seed=seed,
+            priors=priors,
         )
     d = w.P[:, j] - w.P[:, p]
     return float(np.linalg.norm(cache[top, j] - cache[top, p] - d) / np.linalg.norm(d))

@@ -270,11 +270,9 @@ def reconstruct_skeleton(
     root: _F64,
     times: _F64,
     options: Any,
-    angle_ranges: list[tuple[int, int, int, float, float]] = ...,
 ) -> tuple[_F64, list[dict[str, Any] | None]]:
     """Whole skeleton from ``x (F,J,2)`` and ``root (F,3)``: ``X (F,J,3)`` and one dict per
-    joint as in :func:`reconstruct_articulated` (``None`` for the root); ``angle_ranges``:
-    ``(joint, a, b, lo, hi)`` priors on the angle between ``joint``'s bone and ``a → b``."""
+    joint as in :func:`reconstruct_articulated` (``None`` for the root)."""
 
 def skeleton_order(parents: list[int], lengths: list[float]) -> list[int]:
     """Validates a tree (``-1`` = root) and returns a parents-first joint order."""

@@ -11,7 +11,7 @@ the root outwards (Eq 4.6).
 from __future__ import annotations
 
 import dataclasses
-from collections.abc import Mapping, Sequence
+from collections.abc import Sequence
 from dataclasses import dataclass, field, fields, replace
 from typing import Any
 
@@ -335,7 +335,7 @@ class ArticulatedOptions:
         the error at exact length and root unchanged, but on one test scene (131_01) it
         raises the median.
     angle_weight : robust method, with angle priors (``angle_priors`` of
-        :func:`reconstruct_articulated`, or ``Skeleton.angle_ranges``): weight of each prior in
+        :func:`reconstruct_articulated`): weight of each prior in
         the same score, ``angle_weight × mean_t (e_t / angle_tolerance)²``, ``e_t`` the angle
         by which the start's bone at frame ``t`` leaves the prior's range of angles to its
         reference bone; ≥ 0, 0 ignores the priors. At 1, a start outside a range by one
@@ -584,26 +584,16 @@ class Skeleton:
     names : joint names, length ``J``.
     parents : (J,) parent index per joint, ``-1`` for the single root.
     lengths : (J,) bone length from the parent, metres (ignored for the root).
-    angle_ranges : optional priors between bones, ``{(joint, a, b): (lo, hi)}`` radians:
-        the angle between the bone of ``joint`` (its parent → it) and the bone ``a → b``
-        lies in ``[lo, hi]`` — ``(grandparent, parent)`` bounds how the joint bends,
-        ``(parent, sibling)`` keeps two bones of one segment at their angle. Learn them with
-        :func:`learn_angle_ranges`. :func:`reconstruct_skeleton` gives each joint the priors
-        whose ``a`` and ``b`` are reconstructed before it (``angle_weight`` of
-        :class:`ArticulatedOptions`).
-
     Raises
     ------
     ValueError
         Not a tree (no or several roots, a cycle, a parent out of range), a non-positive
-        bone length, an angle prior on the root, on joints out of range or outside
-        0 ≤ lo ≤ hi ≤ π.
+        bone length.
     """
 
     names: tuple[str, ...]
     parents: tuple[int, ...]
     lengths: FloatArray
-    angle_ranges: tuple[tuple[int, int, int, float, float], ...]
     order: tuple[int, ...] = field(init=False)
 
     def __init__(
@@ -611,7 +601,6 @@ class Skeleton:
         names: Sequence[str],
         parents: Sequence[int],
         lengths: npt.ArrayLike,
-        angle_ranges: Mapping[tuple[int, int, int], tuple[float, float]] | None = None,
     ) -> None:
         names_ = tuple(str(n) for n in names)
         parents_ = tuple(int(p) for p in parents)
@@ -622,30 +611,10 @@ class Skeleton:
         # The root has no bone; the core ignores its entry.
         order = _core.skeleton_order(list(parents_), _bone_lengths(parents_, lengths_))
         lengths_.setflags(write=False)
-        ranges_ = []
-        if angle_ranges is not None and not isinstance(angle_ranges, Mapping):
-            raise ValueError("angle_ranges: expected a mapping {(joint, a, b): (lo, hi)}")
-        for key, rng in (angle_ranges or {}).items():
-            if not (isinstance(key, tuple) and len(key) == 3):
-                raise ValueError(f"angle_ranges: expected (joint, a, b) keys, got {key!r}")
-            jt, a, b = (int(v) for v in key)
-            if not all(0 <= v < j for v in (jt, a, b)) or a == b or parents_[jt] == -1:
-                raise ValueError(
-                    f"angle_ranges[{key}]: needs a non-root joint and two distinct joints in 0..{j}"
-                )
-            ranges_.append((jt, a, b, *_angle_range(rng, f"angle_ranges[{key}]")))
         object.__setattr__(self, "names", names_)
         object.__setattr__(self, "parents", parents_)
         object.__setattr__(self, "lengths", lengths_)
-        object.__setattr__(self, "angle_ranges", tuple(ranges_))
         object.__setattr__(self, "order", tuple(order))
-
-    def with_angle_ranges(
-        self, angle_ranges: Mapping[tuple[int, int, int], tuple[float, float]] | None
-    ) -> Skeleton:
-        """The same tree with ``angle_ranges`` (see :class:`Skeleton`; ``None`` removes
-        them)."""
-        return Skeleton(self.names, self.parents, self.lengths, angle_ranges)
 
     @property
     def root(self) -> int:
@@ -732,10 +701,15 @@ def reconstruct_skeleton(
     ----------
     x : (F, J, 2) pixels of every joint (NaN rows missing).
     cameras : ``F`` cameras, one per frame.
-    skeleton : the tree, bone lengths and, optionally, angle priors between bones (see
-        :class:`Skeleton`).
+    skeleton : the tree and bone lengths.
     root : (F, 3) root trajectory, metres.
     options, overrides : as in :func:`reconstruct_articulated`, for every joint.
+
+    No angle priors (``angle_priors`` of :func:`reconstruct_articulated`) are passed between
+    joints: from reconstructed references a flipped ancestor makes a prior wrong and pushes
+    its descendants after it (``benches/articulated_accuracy.py --skeleton``, Fig 4.3(c),
+    seed 0: bend and sibling priors took the mean error 0.147 → 0.128 on one window set but
+    0.151 → 0.178 and 0.177 → 0.322 on two others).
     """
     opts = _options(options, overrides)
     f = len(_check_cameras(cameras))
@@ -746,9 +720,8 @@ def reconstruct_skeleton(
     r_ = as_float_array(root, "root", (f, 3))
     t = _times(cameras)
     lengths = _bone_lengths(skeleton.parents, skeleton.lengths)
-    ranges = list(skeleton.angle_ranges)
     X, dicts = _core.reconstruct_skeleton(
-        cameras.K, cameras.R, cameras.C, x_, list(skeleton.parents), lengths, r_, t, opts, ranges
+        cameras.K, cameras.R, cameras.C, x_, list(skeleton.parents), lengths, r_, t, opts
     )
     joints = tuple(None if d is None else _traj(d, t) for d in dicts)
     return SkeletonReconstruction(readonly(X), joints)
@@ -793,7 +766,7 @@ def learn_angle_ranges(
     quantiles: tuple[float, float] = (0.0, 1.0),
     margin: float = 0.0,
 ) -> dict[tuple[int, int, int], tuple[float, float]]:
-    """Angle priors for :class:`Skeleton` learned from motion capture.
+    """Angle priors for :func:`reconstruct_articulated` learned from motion capture.
 
     Parameters
     ----------
@@ -809,7 +782,9 @@ def learn_angle_ranges(
 
     Returns
     -------
-    ``{(joint, a, b): (lo, hi)}`` radians, for ``Skeleton(angle_ranges=...)``.
+    ``{(joint, a, b): (lo, hi)}`` radians: the angle between the bone of ``joint`` (its
+    parent → it) and the bone ``a → b``; give ``(X[:, b] − X[:, a], (lo, hi))`` as an
+    ``angle_priors`` entry of :func:`reconstruct_articulated`.
     """
     if isinstance(positions, (list, tuple)) and not positions:
         raise ValueError("positions: no clip given")

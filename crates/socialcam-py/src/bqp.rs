@@ -337,7 +337,7 @@ fn reconstruct_articulated<'py>(
 
 /// Whole skeleton from its root (Eq 4.6): `(X (F,J,3), [dict or None per joint])`.
 #[pyfunction]
-#[pyo3(signature = (k_mat, r_mat, c_mat, x, parents, lengths, root, times, options, angle_ranges=Vec::new()))]
+#[pyo3(signature = (k_mat, r_mat, c_mat, x, parents, lengths, root, times, options))]
 #[allow(clippy::too_many_arguments)]
 fn reconstruct_skeleton<'py>(
     py: Python<'py>,
@@ -350,22 +350,12 @@ fn reconstruct_skeleton<'py>(
     root: PyReadonlyArray2<'py, f64>,
     times: PyReadonlyArray1<'py, f64>,
     options: Bound<'py, PyAny>,
-    angle_ranges: Vec<(usize, usize, usize, f64, f64)>,
 ) -> PyResult<(
     Bound<'py, PyArray3<f64>>,
     Vec<Option<Bound<'py, pyo3::types::PyDict>>>,
 )> {
     let options: PyArticulatedOptions = crate::convert::options(&options, "ArticulatedOptions")?;
-    let ranges = angle_ranges
-        .into_iter()
-        .map(|(joint, from, to, lo, hi)| art::AngleRange {
-            joint,
-            from,
-            to,
-            range: (lo, hi),
-        })
-        .collect();
-    let sk = map(skeleton(parents, lengths)?.with_angle_ranges(ranges))?;
+    let sk = skeleton(parents, lengths)?;
     let cams = cameras(&k_mat, &r_mat, &c_mat)?;
     let f = cams.len();
     let nj = sk.n_joints();

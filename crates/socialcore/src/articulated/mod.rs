@@ -1581,8 +1581,6 @@ mod tests;
 pub struct Skeleton {
     parents: Vec<Option<usize>>,
     lengths: Vec<f64>,
-    /// Angle priors between bones ([`AngleRange`]).
-    angle_ranges: Vec<AngleRange>,
     /// Joints in an order where every parent precedes its children, root first.
     order: Vec<usize>,
 }
@@ -1651,44 +1649,10 @@ impl Skeleton {
             ));
         }
         Ok(Skeleton {
-            angle_ranges: Vec::new(),
             parents,
             lengths,
             order,
         })
-    }
-
-    /// The skeleton with angle priors between its bones ([`AngleRange`]): every index in
-    /// range, `from ≠ to`, the range within `0 ≤ lo ≤ hi ≤ π`.
-    pub fn with_angle_ranges(mut self, ranges: Vec<AngleRange>) -> Result<Self> {
-        let n = self.parents.len();
-        for (i, r) in ranges.iter().enumerate() {
-            if r.joint >= n || r.from >= n || r.to >= n {
-                return Err(Error::invalid(
-                    "angle_ranges",
-                    format!("entry {i}: joint index out of range 0..{n}: {r:?}"),
-                ));
-            }
-            if r.from == r.to || self.parents[r.joint].is_none() {
-                return Err(Error::invalid(
-                    "angle_ranges",
-                    format!("entry {i}: needs a non-root joint and two distinct reference joints: {r:?}"),
-                ));
-            }
-            if !valid_range(r.range) {
-                return Err(Error::invalid(
-                    "angle_ranges",
-                    format!("entry {i}: need 0 ≤ lo ≤ hi ≤ π radians, got {:?}", r.range),
-                ));
-            }
-        }
-        self.angle_ranges = ranges;
-        Ok(self)
-    }
-
-    /// The angle priors ([`Skeleton::with_angle_ranges`]).
-    pub fn angle_ranges(&self) -> &[AngleRange] {
-        &self.angle_ranges
     }
 
     pub fn n_joints(&self) -> usize {
@@ -1709,25 +1673,18 @@ impl Skeleton {
     }
 }
 
-/// An angle prior of a [`Skeleton`]: the angle between the bone of `joint` (its parent →
-/// it) and the bone `from → to` lies in `range` (radians). `from = grandparent, to =
-/// parent` bounds how the joint bends; `from = parent, to = sibling` the angle between two
-/// bones of one segment. [`reconstruct_skeleton`] uses it when `from` and `to` are
-/// reconstructed before `joint` (the root, or earlier in [`Skeleton::order`]).
-#[derive(Debug, Clone, Copy, PartialEq)]
-pub struct AngleRange {
-    pub joint: usize,
-    pub from: usize,
-    pub to: usize,
-    pub range: (f64, f64),
-}
-
 /// Positions `[frame][joint]` and one result per joint (`None` for the root).
 pub type SkeletonReconstruction = (Vec<Vec<Vector3<f64>>>, Vec<Option<ArticulatedResult>>);
 
 /// Reconstructs every joint from the root trajectory outwards (forward kinematics, Eq 4.6):
 /// `pixels[i][j]` is joint `j` in frame `i`. Returns positions `[frame][joint]` and one
 /// result per non-root joint (`None` for the root).
+///
+/// No [`AnglePrior`]s here: from reconstructed references a flipped ancestor makes a prior
+/// wrong and pushes its descendants after it (measured on the CMU windows of
+/// `benches/articulated_accuracy.py --skeleton`, Fig 4.3(c), seed 0: bend and sibling priors
+/// took the mean error 0.147 → 0.128 on one window set but 0.151 → 0.178 and 0.177 → 0.322
+/// on two others).
 pub fn reconstruct_skeleton(
     cameras: &[Camera],
     pixels: &[Vec<Option<Vector2<f64>>>],
@@ -1767,26 +1724,13 @@ pub fn reconstruct_skeleton(
                 length: skeleton.lengths()[c],
             })
             .collect();
-        let priors: Vec<AnglePrior> = skeleton
-            .angle_ranges()
-            .iter()
-            .filter(|r| r.joint == j)
-            .filter_map(|r| match (&traj[r.from], &traj[r.to]) {
-                (Some(a), Some(b)) => Some(AnglePrior {
-                    reference: a.iter().zip(b).map(|(a, b)| b - a).collect(),
-                    range: r.range,
-                }),
-                _ => None,
-            })
-            .collect();
-        let res = reconstruct_articulated_prior(
+        let res = reconstruct_articulated_with(
             cameras,
             &px,
             &parent,
             times,
             skeleton.lengths()[j],
             &kids,
-            &priors,
             opts,
         )
         .map_err(|e| match e {

@@ -722,34 +722,3 @@ fn angle_priors_are_checked_and_ignored_at_weight_zero() {
     };
     bad(prior.clone(), &negative, "angle_weight");
 }
-
-#[test]
-fn skeleton_angle_ranges_are_checked() {
-    let sk = Skeleton::new(vec![None, Some(0), Some(1)], vec![0.0, 0.4, 0.3]).expect("tree");
-    let r = |joint, from, to, range| AngleRange {
-        joint,
-        from,
-        to,
-        range,
-    };
-    assert!(sk
-        .clone()
-        .with_angle_ranges(vec![r(2, 0, 3, (0.1, 0.5))])
-        .is_err());
-    assert!(sk
-        .clone()
-        .with_angle_ranges(vec![r(2, 1, 1, (0.1, 0.5))])
-        .is_err());
-    assert!(sk
-        .clone()
-        .with_angle_ranges(vec![r(0, 1, 2, (0.1, 0.5))])
-        .is_err());
-    assert!(sk
-        .clone()
-        .with_angle_ranges(vec![r(2, 0, 1, (0.5, 0.1))])
-        .is_err());
-    let ok = sk
-        .with_angle_ranges(vec![r(2, 0, 1, (0.1, 0.5))])
-        .expect("ranges");
-    assert_eq!(ok.angle_ranges()[0].range, (0.1, 0.5));
-}
