@@ -454,9 +454,20 @@ def reconstruct_articulated(
     Raises
     ------
     ValueError
-        Bad shapes, non-finite parent, ``length <= 0``, a bad or unknown option.
+        Bad shapes, non-finite parent, ``length <= 0``, a bad or unknown option or angle prior.
     DegenerateError
         Fewer observed frames than ``k``.
+
+    Examples
+    --------
+    A right hip from the hips (``parent``) with the left hip given too (the pelvis keeps the
+    two bones at one angle), the range learned from another capture ``mocap (F', J, 3)`` of
+    the same skeleton (``hips``, ``lhip``, ``rhip`` its joint indices):
+
+    >>> ranges = learn_angle_ranges(mocap, parents, bend=False)        # doctest: +SKIP
+    >>> prior = (lhip_xyz - hips_xyz, ranges[rhip, hips, lhip])        # doctest: +SKIP
+    >>> out = reconstruct_articulated(x, cams, hips_xyz, 0.12,
+    ...                               angle_priors=[prior])            # doctest: +SKIP
     """
     opts = _options(options, overrides)
     f = len(_check_cameras(cameras))
