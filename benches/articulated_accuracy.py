@@ -486,74 +486,35 @@ def all_windows(
                 else "held-out"
             )
             wins.append((part, win(name, P, pairs, 2, off)))
-    P85, pairs85 = clips["85_02"]
-    wins += [("fresh", win("85_02", P85, pairs85, 2, off)) for off in FRESH_C3D_OFFSETS]
-    wins += [
-        ("unseen8", win(name, P, pairs, UNSEEN8_STEP, off))
-        for name, (P, pairs) in clips.items()
-        for off in UNSEEN8_OFFSETS
-        if P[off::UNSEEN8_STEP].shape[0] >= 60
-    ]
-    wins += [
-        ("final9", win(name, P, pairs, FINAL9_STEP, off))
-        for name, (P, pairs) in clips.items()
-        for off in FINAL9_OFFSETS
-        if P[off::FINAL9_STEP].shape[0] >= 60
-    ]
-    wins += [
-        ("final11", win(name, P, pairs, FINAL11_STEP, off))
-        for name, (P, pairs) in clips.items()
-        for off in FINAL11_OFFSETS
-        if P[off::FINAL11_STEP].shape[0] >= 60
-    ]
-    wins += [
-        ("final12", win(name, P, pairs, 2, off))
-        for name, (P, pairs) in clips.items()
-        for off in FINAL12_OFFSETS
-        if P[off::2].shape[0] >= 60
-    ]
-    wins += [("final12", win("85_02", P85, pairs85, 2, off)) for off in FINAL12_C3D_OFFSETS]
-    wins += [
-        ("lowrate", win(name, P, pairs, step, off))
-        for name, (P, pairs) in clips.items()
-        for step, off in LOWRATE_CUTS
-        if P[off::step].shape[0] >= 60
-    ]
-    wins += [
-        ("final18", win(name, P, pairs, step, off))
-        for name, (P, pairs) in clips.items()
-        for step, off in FINAL18_CUTS
-        if P[off::step].shape[0] >= 60
-    ]
-    wins += [("final18", win("85_02", P85, pairs85, s, off)) for s, off in FINAL18_C3D_CUTS]
-    wins += [
-        ("final19", win(name, P, pairs, FINAL19_STEP, off))
-        for name, (P, pairs) in clips.items()
-        for off in FINAL19_OFFSETS
-        if P[off::FINAL19_STEP].shape[0] >= 60
-    ]
-    wins += [
-        ("final20", win(name, P, pairs, FINAL20_STEP, off))
-        for name, (P, pairs) in clips.items()
-        for off in FINAL20_OFFSETS
-        if P[off::FINAL20_STEP].shape[0] >= 60
-    ]
-    wins += [
-        ("final20", win("85_02", P85, pairs85, FINAL20_STEP, off))
-        for off in FINAL20_C3D_OFFSETS
-        if P85[off::FINAL20_STEP].shape[0] >= 60
-    ]
-    wins += [
-        ("final21", win(name, P, pairs, FINAL21_STEP, off))
-        for name, (P, pairs) in clips.items()
-        for off in FINAL21_OFFSETS
-        if P[off::FINAL21_STEP].shape[0] >= 60
-    ]
-    wins += [
-        ("final21", win("85_02", P85, pairs85, FINAL21_STEP, off))
-        for off in FINAL21_C3D_OFFSETS
-        if P85[off::FINAL21_STEP].shape[0] >= 60
-    ]
+
+    def cut(part: str, steps_offsets, names=tuple(clips)) -> list[tuple[str, Window]]:
+        """Windows of ``part`` for every clip of ``names`` at each ``(step, offset)`` where
+        60 frames fit, clip by clip."""
+        return [
+            (part, win(name, clips[name][0], clips[name][1], step, off))
+            for name in names
+            for step, off in steps_offsets
+            if clips[name][0][off::step].shape[0] >= 60
+        ]
+
+    def at(step: int, offsets) -> list[tuple[int, int]]:
+        return [(step, off) for off in offsets]
+
+    c3d = ("85_02",)
+    wins += cut("fresh", at(2, FRESH_C3D_OFFSETS), c3d)
+    wins += cut("unseen8", at(UNSEEN8_STEP, UNSEEN8_OFFSETS))
+    wins += cut("final9", at(FINAL9_STEP, FINAL9_OFFSETS))
+    wins += cut("final11", at(FINAL11_STEP, FINAL11_OFFSETS))
+    wins += cut("final12", at(2, FINAL12_OFFSETS))
+    wins += cut("final12", at(2, FINAL12_C3D_OFFSETS), c3d)
+    wins += cut("lowrate", LOWRATE_CUTS)
+    wins += cut("final18", FINAL18_CUTS)
+    wins += cut("final18", FINAL18_C3D_CUTS, c3d)
+    wins += cut("final19", at(FINAL19_STEP, FINAL19_OFFSETS))
+    wins += cut("final20", at(FINAL20_STEP, FINAL20_OFFSETS))
+    wins += cut("final20", at(FINAL20_STEP, FINAL20_C3D_OFFSETS), c3d)
+    wins += cut("final21", at(FINAL21_STEP, FINAL21_OFFSETS))
+    wins += cut("final21", at(FINAL21_STEP, FINAL21_C3D_OFFSETS), c3d)
     return wins
 
 
