@@ -50,12 +50,20 @@ at 30 Hz from frames 13 and 73. Final20 (defined and first run in session 22): e
 40 Hz on the phase frames ≡ 0 mod 3 from frames 33 and 87, and 85_02 also from 333 and 603.
 Final21 (defined in session 25 before it was run): every clip at 30 Hz on the phase frames
 ≡ 0 mod 4 from frames 8 and 56, and 85_02 also from 208 and 508.
+Final22 (defined in session 26 before it was run): every clip at 40 Hz from frames 41 and 71,
+and 85_02 also from 241 and 541.
 "robust-angles" (session 25) adds angle priors (angle_priors): per joint, the range of the
 angle between its bone and its parent's bone (with a grandparent) and each sibling's bone
 (other children of its parent) over every frame of the other trial's clips (131_01* judged by
 131_02* and the reverse; none on 85_02's markers), the grandparent and siblings given 5 % of
 their own bones off like the parent (angle_weight 1; "robust-angles3" at 3); "robust-bend"
 the parent's bone only, "robust-sib" the siblings only.
+"robust-rigid" (session 26) adds, to robust-angles, rigid points: learn_angle_ranges(rigid=0.08)
+also learns the angle at the parent to every other point whose distances to the joint and to
+its parent vary by less than 8 % (std / mean); on 85_02's markers (no anatomy, so no bend nor
+sibling prior) those ranges come from the clip's own frames outside the window's span, as a
+calibration capture of the same marker set would give them; each rigid point given 5 % of its
+distance to the parent off.
 "robust-rk16" is session 17's method (refine_k_max=16; session 18 raised the default to 32).
 --skeleton adds the whole-skeleton reading of Fig 4.3 (run_skeleton): only the root of each
 joint's chain is given 5 % off and every joint is reconstructed from its parent's
@@ -98,6 +106,8 @@ class Window:
     cams: sc.Cameras
     px: np.ndarray  # (F, J, 2)
     eta: dict[int, float]
+    step: int  # source frames per window frame
+    offset: int  # the window's first source frame
 
 
 def bvh_clip(name: str) -> tuple[np.ndarray, list[tuple[int, int]]]:
@@ -147,7 +157,7 @@ def window(
         [sc._core.project(K[None], cams.R[i : i + 1], C[i : i + 1], P[i])[0][0] for i in range(F)]
     )
     eta = {j: sc.articulated_reconstructability(P[:, j], cams, P[:, p], K_DCT) for j, p in pairs}
-    return Window(clip, P, pairs, cams, px, eta)
+    return Window(clip, P, pairs, cams, px, eta, step, offset)
 
 
 def smooth_offset(F: int, magnitude: float, rng: np.random.Generator) -> np.ndarray:
@@ -190,8 +200,10 @@ def run(
     x, rng = observed(w, j, noise, missing, seed)
     parent = w.P[:, p] + smooth_offset(F, root * bone(w, j, p), rng)
     priors = []
-    ranges = ANGLE_RANGES.get(w.clip, {})
+    ranges = window_ranges(w)
     kinds = PRIOR_METHODS.get(method, ())
+    if w.clip in C3D_CLIPS and "rigid" not in kinds:
+        kinds = ()  # markers: no anatomy, no bend nor sibling prior
     g = dict(w.pairs).get(p)
     if "bend" in kinds and g is not None and (j, g, p) in ranges:
         # The grandparent given like the parent: off by a smooth 5 % of its own bone (its own
@@ -199,14 +211,24 @@ def run(
         rng_g = np.random.default_rng(seed * 1000 + 17 * j + 5)
         grand = w.P[:, g] + smooth_offset(F, root * bone(w, p, g), rng_g)
         priors.append((parent - grand, ranges[j, g, p]))
-    if "siblings" in kinds:
-        for c, pc in w.pairs:
-            if pc == p and c != j and (j, p, c) in ranges:
-                # A sibling (another child of the parent; on the pelvis or thorax the angle
-                # between the two bones is nearly constant), given 5 % of its bone off.
+    siblings = [c for c, pc in w.pairs if pc == p and c != j]
+    for kind in ("siblings", "rigid"):
+        if kind not in kinds:
+            continue
+        # "siblings": another child of the parent (on the pelvis or thorax the angle between
+        # the two bones is nearly constant); "rigid": any other point rigid with the joint
+        # and its parent (learned with learn_angle_ranges(rigid=RIGID)). Each given 5 % of
+        # its distance to the parent off.
+        refs = (
+            siblings
+            if kind == "siblings"
+            else [q for (a, b, q) in ranges if a == j and b == p and q not in siblings]
+        )
+        for c in refs:
+            if (j, p, c) in ranges:
                 rng_s = np.random.default_rng(seed * 1000 + 17 * j + 6 + c)
-                sibling = w.P[:, c] + smooth_offset(F, root * bone(w, c, p), rng_s)
-                priors.append((sibling - parent, ranges[j, p, c]))
+                other = w.P[:, c] + smooth_offset(F, root * bone(w, c, p), rng_s)
+                priors.append((other - parent, ranges[j, p, c]))
     points = reconstruct(
         w,
         j,
@@ -303,14 +325,19 @@ def run_skeleton(
         # Angle priors from what is reconstructed already: the grandparent on the chain, and
         # the siblings reconstructed for other chains from the same given root.
         priors = []
-        ranges = ANGLE_RANGES.get(w.clip, {})
+        ranges = window_ranges(w)
         kinds = PRIOR_METHODS.get(method, ())
+        if w.clip in C3D_CLIPS and "rigid" not in kinds:
+            kinds = ()
         if "bend" in kinds and i + 2 < len(chain) and (c, chain[i + 2], pc) in ranges:
             priors.append((cache[top, pc] - cache[top, chain[i + 2]], ranges[c, chain[i + 2], pc]))
-        if "siblings" in kinds:
-            for s_, ps in w.pairs:
-                if ps == pc and s_ != c and (top, s_) in cache and (c, pc, s_) in ranges:
-                    priors.append((cache[top, s_] - cache[top, pc], ranges[c, pc, s_]))
+        sibs = [s_ for s_, ps in w.pairs if ps == pc and s_ != c]
+        refs = sibs if "siblings" in kinds else []
+        if "rigid" in kinds:
+            refs += [q for (a, b, q) in ranges if a == c and b == pc and q not in sibs]
+        for q in refs:
+            if (top, q) in cache and (c, pc, q) in ranges:
+                priors.append((cache[top, q] - cache[top, pc], ranges[c, pc, q]))
         cache[top, c] = reconstruct(
             w,
             c,
@@ -348,6 +375,7 @@ METHOD_OPTIONS: dict[str, dict] = {
     "robust-sib": {"method": "robust"},
     "robust-angles": {"method": "robust"},
     "robust-angles3": {"method": "robust", "angle_weight": 3.0},
+    "robust-rigid": {"method": "robust"},
 }
 # Methods given angle priors (BVH clips): the ranges learned with learn_angle_ranges over
 # every frame of the OTHER trial's clips (131_01* judged by 131_02* and the reverse; same
@@ -358,8 +386,36 @@ PRIOR_METHODS: dict[str, tuple[str, ...]] = {
     "robust-sib": ("siblings",),
     "robust-angles": ("bend", "siblings"),
     "robust-angles3": ("bend", "siblings"),
+    "robust-rigid": ("bend", "siblings", "rigid"),
 }
+# learn_angle_ranges(rigid=RIGID): points whose distances to the joint and its parent vary by
+# less than 8 % (std / mean) count as rigid with them.
+RIGID = 0.08
+C3D_CLIPS = ("85_02",)
 ANGLE_RANGES: dict[str, dict[tuple[int, int, int], tuple[float, float]]] = {}
+CLIP_POSITIONS: dict[str, np.ndarray] = {}
+_WINDOW_RANGES: dict[tuple[str, int, int], dict[tuple[int, int, int], tuple[float, float]]] = {}
+
+
+def window_ranges(w: Window) -> dict[tuple[int, int, int], tuple[float, float]]:
+    """The angle priors for window ``w``: a BVH clip's learned from the other trial
+    (:func:`angle_ranges`); the marker clip's (rigid points only) learned from its own
+    frames outside the window's span, as a calibration capture of the same marker set would
+    give them (same subject and marker placement, so optimistic like the BVH ranges)."""
+    if w.clip not in C3D_CLIPS:
+        return ANGLE_RANGES.get(w.clip, {})
+    key = (w.clip, w.step, w.offset)
+    if key not in _WINDOW_RANGES:
+        P = CLIP_POSITIONS[w.clip]
+        outside = np.ones(P.shape[0], bool)
+        outside[w.offset : w.offset + w.step * (w.P.shape[0] - 1) + 1] = False
+        parents = [-1] * P.shape[1]
+        for c, pc in w.pairs:
+            parents[c] = pc
+        _WINDOW_RANGES[key] = sc.learn_angle_ranges(
+            P[outside], parents, bend=False, siblings=False, rigid=RIGID
+        )
+    return _WINDOW_RANGES[key]
 
 
 def angle_ranges(
@@ -374,7 +430,7 @@ def angle_ranges(
         for c, pc in pairs:
             parents[c] = pc
         others = [Q for n, (Q, _) in clips.items() if n.startswith("131_") and n[:6] != name[:6]]
-        out[name] = sc.learn_angle_ranges(others, parents)
+        out[name] = sc.learn_angle_ranges(others, parents, rigid=RIGID)
     return out
 
 
@@ -403,6 +459,7 @@ PARTS = (
     "final19",
     "final20",
     "final21",
+    "final22",
 )
 # Session 8's never-seen cuts: every clip sampled at 40 Hz (every third frame) from
 # frames 10 and 100, 60 frames each (the other parts sample every second frame).
@@ -440,6 +497,11 @@ FINAL20_STEP, FINAL20_OFFSETS, FINAL20_C3D_OFFSETS = 3, (33, 87), (333, 603)
 # every clip at 30 Hz (every fourth frame) on the sample phase no other 30 Hz part uses
 # (frames ≡ 0 mod 4) from frames 8 and 56 where 60 frames fit, and 85_02 also from 208 and 508.
 FINAL21_STEP, FINAL21_OFFSETS, FINAL21_C3D_OFFSETS = 4, (8, 56), (208, 508)
+# Session 26's never-seen cuts (defined before they were run, first run with the rigid
+# priors): every clip at 40 Hz (every third frame) from frames 41 and 71 where 60 frames fit,
+# and 85_02 also from 241 and 541 (every sample phase of every rate is used by some part by
+# now; these start frames are new).
+FINAL22_STEP, FINAL22_OFFSETS, FINAL22_C3D_OFFSETS = 3, (41, 71), (241, 541)
 
 
 def load_clips() -> dict[str, tuple[np.ndarray, list[tuple[int, int]]]]:
@@ -515,6 +577,8 @@ def all_windows(
     wins += cut("final20", at(FINAL20_STEP, FINAL20_C3D_OFFSETS), c3d)
     wins += cut("final21", at(FINAL21_STEP, FINAL21_OFFSETS))
     wins += cut("final21", at(FINAL21_STEP, FINAL21_C3D_OFFSETS), c3d)
+    wins += cut("final22", at(FINAL22_STEP, FINAL22_OFFSETS))
+    wins += cut("final22", at(FINAL22_STEP, FINAL22_C3D_OFFSETS), c3d)
     return wins
 
 
@@ -544,6 +608,7 @@ def main() -> None:
             raise SystemExit(f"--methods: choose among {', '.join(METHOD_OPTIONS)}")
     clips = load_clips()
     ANGLE_RANGES.update(angle_ranges(clips))
+    CLIP_POSITIONS.update({name: P for name, (P, _) in clips.items()})
     wins = all_windows(clips, static=args.static_camera)
     wins = [(part, w) for part, w in wins if part in parts]
     good = [(part, w, j, p) for part, w in wins for j, p in w.pairs if w.eta[j] > 1.25]

@@ -746,14 +746,15 @@ def bone_angles(
 
     Parameters
     ----------
-    positions : (F, J, 3) joint positions, metres (e.g. motion capture).
+    positions : (F, J, 3) joint positions, metres (e.g. motion capture); NaN where a point
+        is missing (marker gaps).
     bone, reference : pairs of joint indices.
 
     Returns
     -------
-    (F,) radians in [0, π]; NaN where a bone has no length.
+    (F,) radians in [0, π]; NaN where a bone has no length or a point is missing.
     """
-    P = as_float_array(positions, "positions", (None, None, 3))
+    P = as_float_array(positions, "positions", (None, None, 3), allow_nan=True)
     J = P.shape[1]
     for name, pair in (("bone", bone), ("reference", reference)):
         if len(pair) != 2 or not all(0 <= int(v) < J for v in pair):
@@ -774,6 +775,7 @@ def learn_angle_ranges(
     *,
     bend: bool = True,
     siblings: bool = True,
+    rigid: float = 0.0,
     quantiles: tuple[float, float] = (0.0, 1.0),
     margin: float = 0.0,
 ) -> dict[tuple[int, int, int], tuple[float, float]]:
@@ -781,12 +783,18 @@ def learn_angle_ranges(
 
     Parameters
     ----------
-    positions : (F, J, 3) joint positions, metres, or a list of such clips (same joints).
+    positions : (F, J, 3) joint positions, metres, or a list of such clips (same joints);
+        NaN where a point is missing (marker gaps): those frames are left out.
     parents : (J,) parent per joint, ``-1`` for the root.
     bend : learn ``(joint, grandparent, parent)``: the angle between each bone and its
         parent's bone (how the joint bends).
     siblings : learn ``(joint, parent, sibling)`` for every other child of the joint's
         parent: on a rigid segment (pelvis, thorax) the angle is nearly constant.
+    rigid : if > 0, also learn ``(joint, parent, q)`` for every other joint or marker ``q``
+        whose distances to the joint and to its parent both vary by less than ``rigid``
+        (standard deviation over mean, over every frame given): the three move as one rigid
+        body, so the angle at the parent is nearly constant. Made for optical marker sets,
+        whose markers have no anatomy but sit in groups on one segment (e.g. 0.08).
     quantiles : the range's ends as quantiles of the angle over every frame (the default,
         min and max).
     margin : radians added on both sides (≥ 0), the range then clipped to [0, π].
@@ -806,7 +814,7 @@ def learn_angle_ranges(
     )
     parents_ = [int(p) for p in parents]
     J = len(parents_)
-    clips = [as_float_array(c, "positions", (None, J, 3)) for c in clips]
+    clips = [as_float_array(c, "positions", (None, J, 3), allow_nan=True) for c in clips]
     for c, p in enumerate(parents_):
         if p < -1 or p >= J or p == c:
             raise ValueError(f"parents: joint {c} has parent {p}, out of range")
@@ -814,14 +822,40 @@ def learn_angle_ranges(
     if q0 > q1:
         raise ValueError(f"quantiles: need lo <= hi, got {quantiles}")
     m = check_float(margin, "margin", min=0.0, max=float(np.pi))
+    tol = check_float(rigid, "rigid", min=0.0)
+    spread = np.full((J, J), np.inf)
+    if tol > 0:
+        # Relative spread (std / mean) of every pairwise distance over all frames, frames
+        # where either point is missing (NaN) left out; one row of pairs at a time.
+        n, s1, s2 = np.zeros((J, J)), np.zeros((J, J)), np.zeros((J, J))
+        for c in clips:
+            for q in range(J):
+                d = np.linalg.norm(c - c[:, q : q + 1], axis=2)  # (F, J)
+                ok = np.isfinite(d)
+                d = np.where(ok, d, 0.0)
+                n[q] += ok.sum(axis=0)
+                s1[q] += d.sum(axis=0)
+                s2[q] += (d * d).sum(axis=0)
+        seen = (n > 1) & (s1 > 0)
+        mean = np.divide(s1, n, out=np.zeros_like(s1), where=seen)
+        var = np.divide(s2, n, out=np.zeros_like(s2), where=seen) - mean**2
+        spread[seen] = np.sqrt(np.maximum(var[seen], 0.0)) / mean[seen]
     keys: list[tuple[int, int, int]] = []
     for j, p in enumerate(parents_):
         if p == -1:
             continue
-        if bend and parents_[p] != -1:
+        # (In a 2-cycle, j ↔ p, as marker pairs may be, the "grandparent" is j itself.)
+        if bend and parents_[p] not in (-1, j):
             keys.append((j, parents_[p], p))
         if siblings:
             keys += [(j, p, s) for s, ps in enumerate(parents_) if ps == p and s != j]
+        if tol > 0:
+            keys += [
+                (j, p, q)
+                for q in range(J)
+                if q not in (j, p) and spread[q, p] < tol and spread[q, j] < tol
+            ]
+    keys = list(dict.fromkeys(keys))
     out: dict[tuple[int, int, int], tuple[float, float]] = {}
     for j, a, b in keys:
         v = np.concatenate([bone_angles(c, (parents_[j], j), (a, b)) for c in clips])
