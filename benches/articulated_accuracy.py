@@ -58,7 +58,7 @@ angle between its bone and its parent's bone (with a grandparent) and each sibli
 131_02* and the reverse; none on 85_02's markers), the grandparent and siblings given 5 % of
 their own bones off like the parent (angle_weight 1; "robust-angles3" at 3); "robust-bend"
 the parent's bone only, "robust-sib" the siblings only.
-"robust-rigid" (session 26) adds, to robust-angles, rigid points: learn_angle_ranges(rigid=0.08)
+"robust-rigid" (session 26; with the priors' own start, prior_start) adds, to robust-angles, rigid points: learn_angle_ranges(rigid=0.08)
 also learns the angle at the parent to every other point whose distances to the joint and to
 its parent vary by less than 8 % (std / mean); on 85_02's markers (no anatomy, so no bend nor
 sibling prior) those ranges come from the clip's own frames outside the window's span, as a

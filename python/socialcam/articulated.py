@@ -345,6 +345,11 @@ class ArticulatedOptions:
         5°), by which a bone outside a range counts as one unit. The angle computed from a
         parent and reference joints a few percent of their bones off is itself off by
         several degrees.
+    prior_start : robust method, with angle priors: also refine the start that takes, in
+        every observed frame, the root (of the ray and the sphere) whose bone leaves the
+        priors' ranges least. The binary program of Eq 4.12 and the flips at grazing frames
+        choose roots by smoothness; where the whole window follows the impostor no flip
+        reaches the truth, but the priors can still tell the two roots apart frame by frame.
     max_iter : Levenberg–Marquardt iterations of the refinement (≥ 1).
     time_limit : seconds per binary program (the best incumbent is used after it), or
         ``None``.
@@ -368,13 +373,14 @@ class ArticulatedOptions:
     average_starts: bool = False
     angle_weight: float = 1.0
     angle_tolerance: float = float(np.radians(5.0))
+    prior_start: bool = True
     max_iter: int = 100
     time_limit: float | None = None
     node_limit: int | None = DEFAULT_NODE_LIMIT
 
     def __post_init__(self) -> None:
         check_int(self.k, "k", min=1)
-        for name in ("refine", "fit_radius", "average_starts"):
+        for name in ("refine", "fit_radius", "average_starts", "prior_start"):
             if not isinstance(getattr(self, name), (bool, np.bool_)):
                 raise ValueError(f"{name}: expected a bool, got {getattr(self, name)!r}")
         check_choice(self.method, "method", _METHODS)

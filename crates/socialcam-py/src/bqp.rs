@@ -208,6 +208,8 @@ struct PyArticulatedOptions {
     #[pyo3(attribute)]
     angle_tolerance: f64,
     #[pyo3(attribute)]
+    prior_start: bool,
+    #[pyo3(attribute)]
     max_iter: usize,
     #[pyo3(attribute)]
     time_limit: Option<f64>,
@@ -243,6 +245,7 @@ fn art_options(o: &PyArticulatedOptions) -> PyResult<ArticulatedOptions> {
         average_starts: o.average_starts,
         angle_weight: o.angle_weight,
         angle_tolerance: o.angle_tolerance,
+        prior_start: o.prior_start,
         lm: socialcore::geometry::LmOptions {
             max_iterations: o.max_iter,
             ..defaults.lm

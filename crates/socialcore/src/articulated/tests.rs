@@ -636,6 +636,43 @@ fn angle_excess_is_the_angle_outside_the_range() {
 }
 
 #[test]
+fn the_priors_choose_the_root_per_frame() {
+    // Three frames; the reference bone points up (+y), the range is 0°..30°. Frame 0: ¹χ up,
+    // ²χ down → ¹χ. Frame 1: ¹χ down, ²χ tilted 45° → ²χ (out by less). Frame 2: both at
+    // right angles (same excess) → the fallback's root.
+    let up = Vector3::new(0.0, 1.0, 0.0);
+    let tilt = Vector3::new(1.0, 1.0, 0.0).normalize();
+    let side = Vector3::new(1.0, 0.0, 0.0);
+    let cand = Candidates {
+        frames: vec![0, 1, 2],
+        chi1: vec![up, -up, side],
+        chi2: vec![-up, tilt, -side],
+        radius: 1.0,
+    };
+    let parent = vec![Vector3::new(0.5, 0.0, 2.0); 3];
+    let prior = AnglePrior {
+        reference: vec![up * 0.3; 3],
+        range: (0.0, 30f64.to_radians()),
+    };
+    let p = std::slice::from_ref(&prior);
+    assert_eq!(
+        prior_choice(&cand, &parent, p, &[false, true, true]),
+        vec![true, false, true]
+    );
+    assert_eq!(
+        prior_choice(&cand, &parent, p, &[false, true, false]),
+        vec![true, false, false]
+    );
+    // A second prior that prefers ²χ at frame 0 more strongly than the first prefers ¹χ.
+    let down = AnglePrior {
+        reference: vec![-up; 3],
+        range: (0.0, 0.0),
+    };
+    let both = [prior.clone(), down.clone(), down];
+    assert!(!prior_choice(&cand, &parent, &both, &[true; 3])[0]);
+}
+
+#[test]
 fn the_angle_prior_outweighs_a_slightly_better_fit() {
     // σ(cost) ≈ 12.9 px² (50 observations, k = 8). The impostor fits 6 px² better (half a
     // σ) but leaves a prior's range: an angle score of 2 (out by 1.4 tolerances on average)
