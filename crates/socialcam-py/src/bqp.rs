@@ -210,6 +210,8 @@ struct PyArticulatedOptions {
     #[pyo3(attribute)]
     prior_start: bool,
     #[pyo3(attribute)]
+    angle_refine: f64,
+    #[pyo3(attribute)]
     max_iter: usize,
     #[pyo3(attribute)]
     time_limit: Option<f64>,
@@ -246,6 +248,7 @@ fn art_options(o: &PyArticulatedOptions) -> PyResult<ArticulatedOptions> {
         angle_weight: o.angle_weight,
         angle_tolerance: o.angle_tolerance,
         prior_start: o.prior_start,
+        angle_refine: o.angle_refine,
         lm: socialcore::geometry::LmOptions {
             max_iterations: o.max_iter,
             ..defaults.lm

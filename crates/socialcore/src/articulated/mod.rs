@@ -87,6 +87,14 @@ pub const ANGLE_WEIGHT: f64 = 1.0;
 /// leaving the range by whole multiples of this.
 pub const ANGLE_TOLERANCE: f64 = 5.0 * std::f64::consts::PI / 180.0;
 
+/// Default of [`ArticulatedOptions::angle_refine`]: a frame's bone one tolerance outside a
+/// range costs as much as a quarter px² of reprojection error. Chosen on the CMU windows of
+/// `benches/articulated_accuracy.py` (dev / held-out / new / fresh / lowrate, seed 0): under
+/// Fig 4.3(c) 0.5 takes most of the gain of 1 (mean 0.104 → 0.088 against 0.087 on dev + new)
+/// while at exact length and root, where ranges learned from another trial pull a true bone
+/// that leaves them, it costs less (0.043 → 0.043 against 0.049).
+pub const ANGLE_REFINE: f64 = 0.5;
+
 /// Roughness (Eq 4.12 on the refined unit directions) below which two starts count as
 /// equally smooth: keeps the logarithm finite for trajectories inside the basis.
 pub const ROUGHNESS_FLOOR: f64 = 1e-6;
@@ -195,6 +203,10 @@ pub struct ArticulatedOptions {
     /// observed frame leaves the priors' ranges least (a start the binary program and the
     /// flips at grazing frames may miss when the whole window follows the impostor).
     pub prior_start: bool,
+    /// Robust method, with [`AnglePrior`]s: the refinement (Eq 4.5) also minimises each
+    /// frame's excess `e` beyond each prior's range as a residual of
+    /// `angle_refine · e / angle_tolerance` pixels (≥ 0; 0 leaves Eq 4.5 alone).
+    pub angle_refine: f64,
 }
 
 impl Default for ArticulatedOptions {
@@ -222,6 +234,7 @@ impl Default for ArticulatedOptions {
             angle_weight: ANGLE_WEIGHT,
             angle_tolerance: ANGLE_TOLERANCE,
             prior_start: true,
+            angle_refine: ANGLE_REFINE,
         }
     }
 }
@@ -793,6 +806,9 @@ struct Fit<'a> {
     frame: Matrix3<f64>,
     /// Prior on the bone length `(r0, w)`: adds `(w (r − r0) / r0)²` to the cost.
     prior: Option<(f64, f64)>,
+    /// Angle priors read by the refinement, `(priors, s)`: each frame's excess `e` beyond a
+    /// range adds `(s e)²` to the objective [`refine`] minimises (not to [`Fit::cost`]).
+    angles: Option<(&'a [AnglePrior], f64)>,
 }
 
 impl Fit<'_> {
@@ -815,6 +831,30 @@ impl Fit<'_> {
             + self
                 .prior
                 .map_or(0.0, |(r0, w)| (w * (r - r0) / r0).powi(2))
+    }
+
+    /// The angle priors' term of the refinement objective, `Σ_t Σ_priors (s e_t)²`.
+    fn angle_cost(&self, at: &DVector<f64>, ap: &DVector<f64>) -> f64 {
+        let Some((priors, s)) = self.angles else {
+            return 0.0;
+        };
+        let points: Vec<Vector3<f64>> = (0..self.parent.len())
+            .map(|i| self.point(i, at, ap, 1.0))
+            .collect();
+        priors
+            .iter()
+            .map(|p| {
+                angle_excess(&points, self.parent, &p.reference, p.range)
+                    .iter()
+                    .map(|e| (s * e).powi(2))
+                    .sum::<f64>()
+            })
+            .sum()
+    }
+
+    /// Refinement objective: [`Fit::cost`] plus [`Fit::angle_cost`].
+    fn objective(&self, at: &DVector<f64>, ap: &DVector<f64>, r: f64) -> f64 {
+        self.cost(at, ap, r) + self.angle_cost(at, ap)
     }
 }
 
@@ -1109,6 +1149,7 @@ pub fn reconstruct_articulated_prior(
         ("child_slack", opts.child_slack),
         ("length_weight", opts.length_weight),
         ("angle_weight", opts.angle_weight),
+        ("angle_refine", opts.angle_refine),
     ] {
         if !(w.is_finite() && w >= 0.0) {
             return Err(Error::invalid(
@@ -1167,6 +1208,11 @@ pub fn reconstruct_articulated_prior(
             LENGTH_PRIOR * (obs.len() as f64).sqrt() / opts.length_tol,
         )
     });
+    // Angle priors inside the refinement (robust method): residual angle_refine · e /
+    // angle_tolerance, pixels.
+    let angles =
+        (robust && opts.angle_refine > 0.0 && opts.angle_weight > 0.0 && !priors.is_empty())
+            .then_some((priors, opts.angle_refine / opts.angle_tolerance));
     // Orthonormal basis of the observed rows of Θ, for the roughness of Eq 4.12.
     let theta_obs = DMatrix::from_fn(m, opts.k, |a, j| theta[(rays.frames[a], j)]);
     let q1 = observed_basis(&theta_obs)?;
@@ -1180,6 +1226,7 @@ pub fn reconstruct_articulated_prior(
             theta: &theta,
             frame,
             prior,
+            angles,
         };
         let refined = if opts.refine {
             refine(&fit, at, ap, r_thesis, bounds, &opts.lm)?
@@ -1205,6 +1252,7 @@ pub fn reconstruct_articulated_prior(
             theta: &theta,
             frame: *frame,
             prior,
+            angles,
         };
         let points: Vec<Vector3<f64>> = (0..f).map(|i| fit.point(i, at, ap, *r)).collect();
         let dirs: Vec<Vector3<f64>> = (0..f)
@@ -1326,6 +1374,7 @@ pub fn reconstruct_articulated_prior(
             theta: &theta,
             frame: s.1,
             prior,
+            angles,
         };
         (0..f)
             .map(|i| fit.point(i, &s.2 .0, &s.2 .1, s.2 .2))
@@ -1344,6 +1393,7 @@ pub fn reconstruct_articulated_prior(
         theta: &theta,
         frame,
         prior,
+        angles,
     };
     // The selected start with the basis grown to the motion (robust method).
     let (wide, (at, ap, radius, lm_iterations, converged), _) = if robust && opts.refine {
@@ -1451,6 +1501,25 @@ fn grow_basis(
     Ok(best)
 }
 
+/// The unit direction of Eq 4.4 at frame `i` (basis row `i` of `theta`) and its partial derivatives
+/// by that frame's two angles, in world coordinates (`ft` = the spherical frame's transpose).
+fn unit_and_partials(
+    ft: &Matrix3<f64>,
+    theta: &DMatrix<f64>,
+    i: usize,
+    at: &DVector<f64>,
+    ap: &DVector<f64>,
+) -> (Vector3<f64>, Vector3<f64>, Vector3<f64>) {
+    let row = theta.row(i);
+    let (st, ct) = row.dot(&at.transpose()).sin_cos();
+    let (sp, cp) = row.dot(&ap.transpose()).sin_cos();
+    (
+        ft * Vector3::new(st * cp, st * sp, ct),
+        ft * Vector3::new(ct * cp, ct * sp, -st),
+        ft * Vector3::new(-st * sp, st * cp, 0.0),
+    )
+}
+
 /// Levenberg–Marquardt on Eq 4.5 over the `2K` angle coefficients, and the bone length
 /// when `bounds` is given (kept within them by projection).
 fn refine(
@@ -1466,7 +1535,7 @@ fn refine(
     let np = 2 * k + usize::from(free_r);
     let clamp_r = |r: f64| bounds.map_or(r, |(lo, hi)| r.clamp(lo, hi));
     radius = clamp_r(radius);
-    let mut cost = fit.cost(&at, &ap, radius);
+    let mut cost = fit.objective(&at, &ap, radius);
     if !cost.is_finite() {
         return Ok((at, ap, radius, 0, false));
     }
@@ -1480,14 +1549,9 @@ fn refine(
         let mut jrow_v = DVector::<f64>::zeros(np);
         for &(i, u) in fit.obs {
             let row = fit.theta.row(i);
-            let th = row.dot(&at.transpose());
-            let ph = row.dot(&ap.transpose());
-            let (st, ct) = th.sin_cos();
-            let (sp, cp) = ph.sin_cos();
-            let dir = ft * Vector3::new(st * cp, st * sp, ct);
+            let (dir, dth, dph) = unit_and_partials(&ft, fit.theta, i, &at, &ap);
             let x = fit.parent[i] + dir * radius;
-            let dth = ft * Vector3::new(ct * cp, ct * sp, -st) * radius;
-            let dph = ft * Vector3::new(-st * sp, st * cp, 0.0) * radius;
+            let (dth, dph) = (dth * radius, dph * radius);
             let cam = &fit.cameras[i];
             let kr = cam.k * cam.r;
             let h = kr * (x - cam.c);
@@ -1512,6 +1576,44 @@ fn refine(
             jtj.ger(1.0, &jrow_v, &jrow_v, 1.0);
             jtr.axpy(ru, &jrow_u, 1.0);
             jtr.axpy(rv, &jrow_v, 1.0);
+        }
+        if let Some((priors, s)) = fit.angles {
+            // Each frame's excess beyond a range: e = lo − α or α − hi, α the angle between
+            // the unit direction and the reference; ∂α/∂q = −(b̂ · ∂u/∂q) / sin α.
+            let mut jrow = DVector::<f64>::zeros(np);
+            for i in 0..fit.parent.len() {
+                let row = fit.theta.row(i);
+                let (dir, dth, dph) = unit_and_partials(&ft, fit.theta, i, &at, &ap);
+                for p in priors {
+                    let b = p.reference[i];
+                    let nb = b.norm();
+                    if nb <= 0.0 {
+                        continue;
+                    }
+                    let b = b / nb;
+                    let c = dir.dot(&b).clamp(-1.0, 1.0);
+                    let alpha = c.acos();
+                    let sin = (1.0 - c * c).sqrt();
+                    let (e, sign) = if alpha < p.range.0 {
+                        (p.range.0 - alpha, -1.0)
+                    } else if alpha > p.range.1 {
+                        (alpha - p.range.1, 1.0)
+                    } else {
+                        continue;
+                    };
+                    if sin < 1e-9 {
+                        continue;
+                    }
+                    let (gt, gp) = (-b.dot(&dth) / sin, -b.dot(&dph) / sin);
+                    jrow.fill(0.0);
+                    for j in 0..k {
+                        jrow[j] = s * sign * gt * row[j];
+                        jrow[k + j] = s * sign * gp * row[j];
+                    }
+                    jtj.ger(1.0, &jrow, &jrow, 1.0);
+                    jtr.axpy(s * e, &jrow, 1.0);
+                }
+            }
         }
         if let (true, Some((r0, w))) = (free_r, fit.prior) {
             let d = w / r0;
@@ -1538,7 +1640,7 @@ fn refine(
             } else {
                 radius
             };
-            let cn = fit.cost(&nt, &npv, nr);
+            let cn = fit.objective(&nt, &npv, nr);
             if cn.is_finite() && cn <= cost {
                 let rel = (cost - cn) / cost.max(f64::MIN_POSITIVE);
                 at = nt;
