@@ -64,6 +64,9 @@ its parent vary by less than 8 % (std / mean); on 85_02's markers (no anatomy, s
 sibling prior) those ranges come from the clip's own frames outside the window's span, as a
 calibration capture of the same marker set would give them; each rigid point given 5 % of its
 distance to the parent off.
+Every method with priors also runs the robust method's two uses of them added in session 26
+(ArticulatedOptions defaults): prior_start (a start whose root per frame the priors choose)
+and angle_refine = 0.5 (the priors' excess as residuals of the refinement of Eq 4.5).
 "robust-rk16" is session 17's method (refine_k_max=16; session 18 raised the default to 32).
 --skeleton adds the whole-skeleton reading of Fig 4.3 (run_skeleton): only the root of each
 joint's chain is given 5 % off and every joint is reconstructed from its parent's
