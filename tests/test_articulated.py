@@ -880,6 +880,7 @@ def test_bad_angle_priors_are_refused_by_name(scene: Scene) -> None:
         (dict(angle_tolerance=0.0), r"^angle_tolerance"),
         (dict(angle_weight=-1.0), r"^angle_weight"),
         (dict(prior_start=1), r"^prior_start: expected a bool"),
+        (dict(angle_refine=-1.0), r"^angle_refine"),
     ):
         with pytest.raises(ValueError, match=message):
             sc.reconstruct_articulated(x, scene.cams, parent, r, k=8, **kw)
