@@ -807,4 +807,9 @@ fn angle_priors_are_checked_and_ignored_at_weight_zero() {
         ..o
     };
     bad(prior.clone(), &negative, "angle_weight");
+    let pull = ArticulatedOptions {
+        angle_refine: f64::NAN,
+        ..o
+    };
+    bad(prior.clone(), &pull, "angle_refine");
 }
