@@ -458,11 +458,14 @@ def reconstruct_articulated(
         between the bone (parent → joint) and the reference bone lies in the range. With a
         kinematic tree, the parent's bone (``parent − grandparent``) bounds how the joint
         bends and a sibling's bone (``sibling − parent``) keeps two bones of one rigid
-        segment (pelvis, thorax) at their angle; learn the ranges from motion capture with
+        segment (pelvis, thorax) at their angle; any point rigid with the joint and its
+        parent (``point − parent``; a marker on the same segment) keeps its angle too
+        (``learn_angle_ranges(rigid=...)``). Learn the ranges from motion capture with
         :func:`learn_angle_ranges`. The robust method scores each start's excess beyond the
-        ranges (``angle_weight``, ``angle_tolerance``): where the pixels and smoothness
-        cannot tell the two roots of a ray apart, the impostor side often puts the bone
-        where the body does not.
+        ranges (``angle_weight``, ``angle_tolerance``), adds the start the priors choose
+        frame by frame (``prior_start``) and pulls the refined bone into the ranges
+        (``angle_refine``): where the pixels and smoothness cannot tell the two roots of a
+        ray apart, the impostor side often puts the bone where the body does not.
     options : :class:`ArticulatedOptions`; ``overrides`` replace some of its fields
         (e.g. ``k=10, method="thesis"``).
 
