@@ -318,9 +318,21 @@ pub fn angle_excess(
                 return 0.0;
             }
             let angle = (a.dot(b) / (na * nb)).clamp(-1.0, 1.0).acos();
-            (range.0 - angle).max(angle - range.1).max(0.0)
+            range_excess(angle, range).map_or(0.0, |(e, _)| e)
         })
         .collect()
+}
+
+/// How far `angle` lies outside `(lo, hi)` and the derivative of that excess by the angle
+/// (−1 below, +1 above); `None` inside.
+fn range_excess(angle: f64, (lo, hi): (f64, f64)) -> Option<(f64, f64)> {
+    if angle < lo {
+        Some((lo - angle, -1.0))
+    } else if angle > hi {
+        Some((angle - hi, 1.0))
+    } else {
+        None
+    }
 }
 
 /// Per observed candidate, the root (`true` = `¹χ`) whose unit direction from the parent
@@ -1594,11 +1606,7 @@ fn refine(
                     let c = dir.dot(&b).clamp(-1.0, 1.0);
                     let alpha = c.acos();
                     let sin = (1.0 - c * c).sqrt();
-                    let (e, sign) = if alpha < p.range.0 {
-                        (p.range.0 - alpha, -1.0)
-                    } else if alpha > p.range.1 {
-                        (alpha - p.range.1, 1.0)
-                    } else {
+                    let Some((e, sign)) = range_excess(alpha, p.range) else {
                         continue;
                     };
                     if sin < 1e-9 {
