@@ -79,6 +79,9 @@ trajectory is a lower bound"), which is what the main table does (each joint's p
 --static-camera: a stationary camera, as in the thesis' Fig 4.3 ("while the camera is
 stationary"); fewer joints reach η_a > 1.25 and the error is higher (session 12: dev 0.185,
 new 0.261).
+"robust-kbic" (session 27, off by default in the library) is robust-rigid run again at
+k = 12 and 16 (k_alternatives), the result with the lowest BIC of its final fit plus the angle
+priors' excess kept: a basis chosen to the window's motion (the thesis chooses K by hand).
 Run: python benches/articulated_accuracy.py [--quick | --full] [--parts dev,fresh,...]
 [--methods robust,thesis] [--skeleton] [--static-camera]
 """
@@ -379,6 +382,7 @@ METHOD_OPTIONS: dict[str, dict] = {
     "robust-angles": {"method": "robust"},
     "robust-angles3": {"method": "robust", "angle_weight": 3.0},
     "robust-rigid": {"method": "robust"},
+    "robust-kbic": {"method": "robust", "k_alternatives": (12, 16)},
 }
 # Methods given angle priors (BVH clips): the ranges learned with learn_angle_ranges over
 # every frame of the OTHER trial's clips (131_01* judged by 131_02* and the reverse; same
@@ -390,6 +394,7 @@ PRIOR_METHODS: dict[str, tuple[str, ...]] = {
     "robust-angles": ("bend", "siblings"),
     "robust-angles3": ("bend", "siblings"),
     "robust-rigid": ("bend", "siblings", "rigid"),
+    "robust-kbic": ("bend", "siblings", "rigid"),
 }
 # learn_angle_ranges(rigid=RIGID): points whose distances to the joint and its parent vary by
 # less than 8 % (std / mean) count as rigid with them.

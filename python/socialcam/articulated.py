@@ -357,6 +357,18 @@ class ArticulatedOptions:
         ranges the capture never leaves; at 0.5 (default) the bench's mean error drops by
         about 15 %. Ranges learned from another capture that miss the true angles pull the
         bone off them: at exact length and root the error then rises slightly.
+    k_alternatives : robust method: other basis sizes to run the whole reconstruction with
+        (e.g. ``(12, 16)``; each ≥ 1, at most the number of frames); the result whose final
+        fit has the lowest Bayesian information criterion ``2n ln(c / 2n) + (2k' + 1) ln 2n``
+        (as in ``refine_k_max``), plus the angle priors' excess ``Σ_t (e_t /
+        angle_tolerance)²`` over every prior and frame when ``angle_priors`` are given, is
+        returned. ``k`` is a prior on smoothness that a window spanning seconds of fast
+        motion exceeds; the basis grown after the selection (``refine_k_max``) cannot undo a
+        start chosen at a ``k`` too small. The priors' term keeps a larger basis from being
+        chosen for following the impostor root in some frames (the pixels cannot tell).
+        Off (``()``) by default: each size costs one more reconstruction, and on the
+        bench's 60 Hz windows it helps no more than it hurts (see the bench's record).
+        :func:`reconstruct_articulated` only (:func:`reconstruct_skeleton` keeps ``k``).
     max_iter : Levenberg–Marquardt iterations of the refinement (≥ 1).
     time_limit : seconds per binary program (the best incumbent is used after it), or
         ``None``.
@@ -382,6 +394,7 @@ class ArticulatedOptions:
     angle_tolerance: float = float(np.radians(5.0))
     prior_start: bool = True
     angle_refine: float = 0.5
+    k_alternatives: tuple[int, ...] = ()
     max_iter: int = 100
     time_limit: float | None = None
     node_limit: int | None = DEFAULT_NODE_LIMIT
@@ -406,6 +419,14 @@ class ArticulatedOptions:
         check_float(
             self.angle_tolerance, "angle_tolerance", min=0.0, max=float(np.pi), min_exclusive=True
         )
+        if isinstance(self.k_alternatives, (str, bytes)) or not isinstance(
+            self.k_alternatives, (tuple, list)
+        ):
+            raise ValueError(
+                f"k_alternatives: expected a tuple of basis sizes, got {self.k_alternatives!r}"
+            )
+        for i, kk in enumerate(self.k_alternatives):
+            check_int(kk, f"k_alternatives[{i}]", min=1)
         check_int(self.max_iter, "max_iter", min=1, max=100_000)
         if self.time_limit is not None:
             check_float(self.time_limit, "time_limit", min=0.0, max=1e9)
@@ -517,10 +538,47 @@ def reconstruct_articulated(
         lo, hi = _angle_range(prior[1], f"angle_priors[{i}] range")
         priors.append((ref, lo, hi))
     t = _times(cameras)
-    d = _core.reconstruct_articulated(
-        cameras.K, cameras.R, cameras.C, x_, p_, t, length_, opts, kids, priors
-    )
-    return _traj(d, t)
+    sizes = [opts.k]
+    if opts.method == "robust":
+        for i, kk in enumerate(opts.k_alternatives):
+            sizes.append(check_int(kk, f"k_alternatives[{i}]", min=1, max=f))
+    best: tuple[float, dict[str, Any]] | None = None
+    for kk in dict.fromkeys(sizes):
+        d = _core.reconstruct_articulated(
+            cameras.K, cameras.R, cameras.C, x_, p_, t, length_, replace(opts, k=kk), kids, priors
+        )
+        if len(sizes) == 1:
+            return _traj(d, t)
+        score = _choice_score(d, p_, priors, opts.angle_tolerance)
+        if best is None or score < best[0]:
+            best = (score, d)
+    assert best is not None
+    return _traj(best[1], t)
+
+
+def _choice_score(
+    d: dict[str, Any],
+    parent: FloatArray,
+    priors: list[tuple[FloatArray, float, float]],
+    tolerance: float,
+) -> float:
+    """The score of ``k_alternatives``: BIC of the final fit (as the Rust core's
+    ``refinement_bic``) plus the angle priors' excess, ``Σ (e / tolerance)²``."""
+    n_obs = int(d["n_observed"])
+    n = max(2 * n_obs, 1)
+    cost = max(float(d["reprojection_rms"]) ** 2 * n_obs, np.finfo(float).tiny)
+    k_final = len(d["coeffs_theta"])
+    score = n * np.log(cost / n) + (2 * k_final + 1) * np.log(n)
+    bone = np.asarray(d["X"], dtype=float) - parent
+    nb = np.linalg.norm(bone, axis=1)
+    for ref, lo, hi in priors:
+        nr = np.linalg.norm(ref, axis=1)
+        ok = (nb > 0) & (nr > 0)
+        cos = np.einsum("ij,ij->i", bone[ok], ref[ok]) / (nb[ok] * nr[ok])
+        a = np.arccos(np.clip(cos, -1.0, 1.0))
+        e = np.maximum(lo - a, 0.0) + np.maximum(a - hi, 0.0)
+        score += float(((e / tolerance) ** 2).sum())
+    return float(score)
 
 
 def _angle_range(r: object, name: str) -> tuple[float, float]:
