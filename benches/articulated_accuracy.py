@@ -51,7 +51,9 @@ at 30 Hz from frames 13 and 73. Final20 (defined and first run in session 22): e
 Final21 (defined in session 25 before it was run): every clip at 30 Hz on the phase frames
 ≡ 0 mod 4 from frames 8 and 56, and 85_02 also from 208 and 508.
 Final22 (defined in session 26 before it was run): every clip at 40 Hz from frames 41 and 71,
-and 85_02 also from 241 and 541.
+and 85_02 also from 241 and 541. Final23 (defined in session 27 before it was run): every
+clip at 24 Hz from frames 17 and 37, at 30 Hz from 47 and at 60 Hz from 45; 85_02 also at
+20 Hz from 103 and 403.
 "robust-angles" (session 25) adds angle priors (angle_priors): per joint, the range of the
 angle between its bone and its parent's bone (with a grandparent) and each sibling's bone
 (other children of its parent) over every frame of the other trial's clips (131_01* judged by
@@ -468,6 +470,7 @@ PARTS = (
     "final20",
     "final21",
     "final22",
+    "final23",
 )
 # Session 8's never-seen cuts: every clip sampled at 40 Hz (every third frame) from
 # frames 10 and 100, 60 frames each (the other parts sample every second frame).
@@ -510,6 +513,11 @@ FINAL21_STEP, FINAL21_OFFSETS, FINAL21_C3D_OFFSETS = 4, (8, 56), (208, 508)
 # and 85_02 also from 241 and 541 (every sample phase of every rate is used by some part by
 # now; these start frames are new).
 FINAL22_STEP, FINAL22_OFFSETS, FINAL22_C3D_OFFSETS = 3, (41, 71), (241, 541)
+# Session 27's never-seen cuts (defined before they were run): every clip at 24 Hz from
+# frames 17 and 37, at 30 Hz from frame 47 and at 60 Hz from frame 45; 85_02 also at 20 Hz
+# from frames 103 and 403.
+FINAL23_CUTS = ((5, 17), (5, 37), (4, 47), (2, 45))
+FINAL23_C3D_CUTS = ((6, 103), (6, 403))
 
 
 def load_clips() -> dict[str, tuple[np.ndarray, list[tuple[int, int]]]]:
@@ -587,6 +595,8 @@ def all_windows(
     wins += cut("final21", at(FINAL21_STEP, FINAL21_C3D_OFFSETS), c3d)
     wins += cut("final22", at(FINAL22_STEP, FINAL22_OFFSETS))
     wins += cut("final22", at(FINAL22_STEP, FINAL22_C3D_OFFSETS), c3d)
+    wins += cut("final23", FINAL23_CUTS)
+    wins += cut("final23", FINAL23_C3D_CUTS, c3d)
     return wins
 
 
