@@ -570,12 +570,9 @@ def _choice_score(
     k_final = len(d["coeffs_theta"])
     score = n * np.log(cost / n) + (2 * k_final + 1) * np.log(n)
     bone = np.asarray(d["X"], dtype=float) - parent
-    nb = np.linalg.norm(bone, axis=1)
     for ref, lo, hi in priors:
-        nr = np.linalg.norm(ref, axis=1)
-        ok = (nb > 0) & (nr > 0)
-        cos = np.einsum("ij,ij->i", bone[ok], ref[ok]) / (nb[ok] * nr[ok])
-        a = np.arccos(np.clip(cos, -1.0, 1.0))
+        a = _vector_angles(bone, ref)
+        a = a[np.isfinite(a)]
         e = np.maximum(lo - a, 0.0) + np.maximum(a - hi, 0.0)
         score += float(((e / tolerance) ** 2).sum())
     return float(score)
@@ -837,8 +834,14 @@ def bone_angles(
             raise ValueError(f"{name}: expected two joint indices in 0..{J}, got {pair!r}")
     u = P[:, int(bone[1])] - P[:, int(bone[0])]
     v = P[:, int(reference[1])] - P[:, int(reference[0])]
+    return _vector_angles(u, v)
+
+
+def _vector_angles(u: FloatArray, v: FloatArray) -> FloatArray:
+    """Row by row, the angle in radians between ``u`` and ``v`` (both (F, 3)); NaN where
+    either has no length or is missing."""
     nu, nv = np.linalg.norm(u, axis=1), np.linalg.norm(v, axis=1)
-    out = np.full(P.shape[0], np.nan)
+    out = np.full(u.shape[0], np.nan)
     ok = (nu > 0) & (nv > 0)
     cos = np.einsum("ij,ij->i", u[ok], v[ok]) / (nu[ok] * nv[ok])
     out[ok] = np.arccos(np.clip(cos, -1.0, 1.0))
