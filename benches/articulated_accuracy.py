@@ -84,6 +84,11 @@ new 0.261).
 "robust-kbic" (session 27, off by default in the library) is robust-rigid run again at
 k = 12 and 16 (k_alternatives), the result with the lowest BIC of its final fit plus the angle
 priors' excess kept: a basis chosen to the window's motion (the thesis chooses K by hand).
+"robust-kgate" (session 28) tries those sizes only up to 8 per second of the window
+(k_per_second = 8): 60 Hz windows (1 s) keep k = 8, 40 Hz (1.5 s) try 12, 30 Hz and slower
+(2 s and more) 12 and 16. Since session 28 the cameras' times are in seconds (frame / 120 Hz
+× step; before: frame / 60 whatever the step); the DCT basis does not depend on the time unit
+(dev, seed 0: identical figures).
 Run: python benches/articulated_accuracy.py [--quick | --full] [--parts dev,fresh,...]
 [--methods robust,thesis] [--skeleton] [--static-camera]
 """
@@ -103,6 +108,8 @@ from socialcam.synth.cameras import look_at
 
 ROOT = Path(__file__).resolve().parent.parent
 MOCAP = ROOT / "tests" / "data" / "mocap"
+# Every clip of the bench is captured at 120 Hz; a window every `step` frames is at 120 / step Hz.
+SOURCE_HZ = 120.0
 K_DCT = 8
 
 
@@ -160,7 +167,7 @@ def window(
     at = np.repeat(centre.mean(axis=0)[None], F, axis=0) if static else centre
     C = at + 1.5 * (np.cos(ang)[:, None] * side + np.sin(ang)[:, None] * d) + [0, 0.3, 0]
     K = np.array([[1000.0, 0, 640], [0, 1000.0, 360], [0, 0, 1]])
-    cams = sc.Cameras(K, look_at(C, at, up=(0.0, 1.0, 0.0)), C, np.arange(F) / 60)
+    cams = sc.Cameras(K, look_at(C, at, up=(0.0, 1.0, 0.0)), C, np.arange(F) * step / SOURCE_HZ)
     px = np.stack(
         [sc._core.project(K[None], cams.R[i : i + 1], C[i : i + 1], P[i])[0][0] for i in range(F)]
     )
@@ -384,7 +391,8 @@ METHOD_OPTIONS: dict[str, dict] = {
     "robust-angles": {"method": "robust"},
     "robust-angles3": {"method": "robust", "angle_weight": 3.0},
     "robust-rigid": {"method": "robust"},
-    "robust-kbic": {"method": "robust", "k_alternatives": (12, 16)},
+    "robust-kbic": {"method": "robust", "k_alternatives": (12, 16), "k_per_second": None},
+    "robust-kgate": {"method": "robust", "k_alternatives": (12, 16), "k_per_second": 8.0},
 }
 # Methods given angle priors (BVH clips): the ranges learned with learn_angle_ranges over
 # every frame of the OTHER trial's clips (131_01* judged by 131_02* and the reverse; same
@@ -397,6 +405,7 @@ PRIOR_METHODS: dict[str, tuple[str, ...]] = {
     "robust-angles3": ("bend", "siblings"),
     "robust-rigid": ("bend", "siblings", "rigid"),
     "robust-kbic": ("bend", "siblings", "rigid"),
+    "robust-kgate": ("bend", "siblings", "rigid"),
 }
 # learn_angle_ranges(rigid=RIGID): points whose distances to the joint and its parent vary by
 # less than 8 % (std / mean) count as rigid with them.

@@ -82,9 +82,9 @@ def test_bqp_bad_input() -> None:
         sc.solve_bqp(np.eye(2), time_limit=-1.0)
 
 
-def _orbit(P: np.ndarray, aim: np.ndarray) -> tuple[sc.Cameras, np.ndarray]:
-    """One camera per frame (60 Hz, f = 1000 px) on a 1 rad arc 1.5 m from ``aim`` (F, 3),
-    0.3 m above it, looking at it; and the pixels of the points ``P`` (F, J, 3)."""
+def _orbit(P: np.ndarray, aim: np.ndarray, rate: float = 60.0) -> tuple[sc.Cameras, np.ndarray]:
+    """One camera per frame (``rate`` Hz, f = 1000 px) on a 1 rad arc 1.5 m from ``aim``
+    (F, 3), 0.3 m above it, looking at it; and the pixels of the points ``P`` (F, J, 3)."""
     F = P.shape[0]
     walk = aim[-1] - aim[0]
     walk[1] = 0
@@ -94,7 +94,7 @@ def _orbit(P: np.ndarray, aim: np.ndarray) -> tuple[sc.Cameras, np.ndarray]:
     C = aim + 1.5 * (np.cos(ang) * side + np.sin(ang) * walk) + [0.0, 0.3, 0.0]
     K = np.array([[1000.0, 0, 640], [0, 1000.0, 360], [0, 0, 1]])
     R = look_at(C, aim, up=(0.0, 1.0, 0.0))
-    cams = sc.Cameras(K, R, C, np.arange(F) / 60)
+    cams = sc.Cameras(K, R, C, np.arange(F) / rate)
     Ks = np.broadcast_to(K, (F, 3, 3))
     px = np.stack(
         [
@@ -755,7 +755,7 @@ def test_other_basis_sizes_follow_fast_marker_motion() -> None:
     outside = np.ones(Q.shape[0], bool)
     outside[7 : 7 + 6 * 59 + 1] = False
     ranges = sc.learn_angle_ranges(Q[outside], parents, bend=False, siblings=False, rigid=0.08)
-    cams, px = _orbit(P, P.mean(axis=1))
+    cams, px = _orbit(P, P.mean(axis=1), rate=20.0)
     errs: dict[str, list[float]] = {"k8": [], "alt": []}
     for j, p in enumerate(parents):
         refs = [(q, lohi) for (jj, pp, q), lohi in ranges.items() if (jj, pp) == (j, p)]
@@ -772,6 +772,36 @@ def test_other_basis_sizes_follow_fast_marker_motion() -> None:
     k8, alt = (float(np.mean(errs[n])) for n in ("k8", "alt"))
     assert len(errs["k8"]) >= 16, len(errs["k8"])
     assert alt < 0.75 * k8 and alt < 0.13, (k8, alt)
+
+
+def test_basis_sizes_are_tried_up_to_k_per_second_of_the_window() -> None:
+    # k_per_second = 8 (default) caps the k_alternatives tried at 8 per second of the
+    # window. RightKnee of 131_01 walking, 1 px noise: tried at every size (k_per_second =
+    # None) the choice is k = 16 whatever the frame rate (the DCT basis does not depend on
+    # the time unit). A 1 s window (60 frames at 60 Hz) keeps k = 8; 1.5 s (40 Hz) tries
+    # 12 only; 3 s (20 Hz) tries 12 and 16. Without times the duration is unknown: k only.
+    P, skeleton, _, _, _ = _clip_window("cmu_131_01_walk300.bvh", 0)
+    j = skeleton.index("RightKnee")
+    p = skeleton.parents[j]
+    r = float(np.linalg.norm(P[:, j] - P[:, p], axis=1).mean())
+    alt = dict(k_alternatives=(12, 16))
+    for rate in (60.0, 40.0, 20.0, None):
+        cams, px = _orbit(P, P.mean(axis=1), rate=rate or 60.0)
+        if rate is None:
+            cams = sc.Cameras(cams.K, cams.R, cams.C)
+        x = px[:, j] + np.random.default_rng(3).normal(0, 1.0, (60, 2))
+        size = {
+            kk: sc.reconstruct_articulated(x, cams, P[:, p], r, k=kk).points for kk in (8, 12, 16)
+        }
+        gated = sc.reconstruct_articulated(x, cams, P[:, p], r, k=8, **alt).points
+        every = sc.reconstruct_articulated(x, cams, P[:, p], r, k=8, k_per_second=None, **alt)
+        np.testing.assert_array_equal(every.points, size[16])
+        if rate == 40.0:
+            twelve = sc.reconstruct_articulated(x, cams, P[:, p], r, k=8, k_alternatives=(12,))
+            np.testing.assert_array_equal(gated, twelve.points)
+            assert not np.array_equal(gated, size[16])
+        else:
+            np.testing.assert_array_equal(gated, size[16] if rate == 20.0 else size[8])
 
 
 def test_the_priors_own_start_reaches_a_hip_the_flips_miss() -> None:
@@ -925,6 +955,8 @@ def test_bad_angle_priors_are_refused_by_name(scene: Scene) -> None:
         (dict(k_alternatives=12), r"^k_alternatives: expected a tuple"),
         (dict(k_alternatives=(12, 0)), r"^k_alternatives\[1\]"),
         (dict(k_alternatives=(len(x) + 1,)), r"^k_alternatives\[0\]"),
+        (dict(k_per_second=0.0), r"^k_per_second"),
+        (dict(k_per_second=float("nan")), r"^k_per_second"),
     ):
         with pytest.raises(ValueError, match=message):
             sc.reconstruct_articulated(x, scene.cams, parent, r, k=8, **kw)

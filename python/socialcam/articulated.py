@@ -369,6 +369,13 @@ class ArticulatedOptions:
         Off (``()``) by default: each size costs one more reconstruction, and on the
         bench's 60 Hz windows it helps no more than it hurts (see the bench's record).
         :func:`reconstruct_articulated` only (:func:`reconstruct_skeleton` keeps ``k``).
+    k_per_second : with ``k_alternatives``: the largest basis size tried per second of the
+        window (> 0, default 8: frequencies up to about 4 Hz); a size above
+        ``k_per_second × duration`` is skipped, the duration ``F · (t_max − t_min) / (F − 1)``
+        from ``cameras.times`` in seconds. A one-second window keeps ``k = 8``; a window of
+        three seconds tries 12 and 16. Without ``cameras.times`` (frame indices, the
+        duration unknown) every alternative is skipped. ``None`` tries every alternative
+        whatever the duration.
     max_iter : Levenberg–Marquardt iterations of the refinement (≥ 1).
     time_limit : seconds per binary program (the best incumbent is used after it), or
         ``None``.
@@ -395,6 +402,7 @@ class ArticulatedOptions:
     prior_start: bool = True
     angle_refine: float = 0.5
     k_alternatives: tuple[int, ...] = ()
+    k_per_second: float | None = 8.0
     max_iter: int = 100
     time_limit: float | None = None
     node_limit: int | None = DEFAULT_NODE_LIMIT
@@ -427,6 +435,8 @@ class ArticulatedOptions:
             )
         for i, kk in enumerate(self.k_alternatives):
             check_int(kk, f"k_alternatives[{i}]", min=1)
+        if self.k_per_second is not None:
+            check_float(self.k_per_second, "k_per_second", min=0.0, max=1e6, min_exclusive=True)
         check_int(self.max_iter, "max_iter", min=1, max=100_000)
         if self.time_limit is not None:
             check_float(self.time_limit, "time_limit", min=0.0, max=1e9)
@@ -540,8 +550,11 @@ def reconstruct_articulated(
     t = _times(cameras)
     sizes = [opts.k]
     if opts.method == "robust":
+        cap = _largest_size(cameras, opts.k_per_second)
         for i, kk in enumerate(opts.k_alternatives):
-            sizes.append(check_int(kk, f"k_alternatives[{i}]", min=1, max=f))
+            kk = check_int(kk, f"k_alternatives[{i}]", min=1, max=f)
+            if kk <= cap:
+                sizes.append(kk)
     best: tuple[float, dict[str, Any]] | None = None
     for kk in dict.fromkeys(sizes):
         d = _core.reconstruct_articulated(
@@ -554,6 +567,20 @@ def reconstruct_articulated(
             best = (score, d)
     assert best is not None
     return _traj(best[1], t)
+
+
+def _largest_size(cameras: Cameras, per_second: float | None) -> float:
+    """The largest ``k_alternatives`` size worth trying (``k_per_second``): the window's
+    duration in seconds (its frames' cells, as the DCT basis spans them) times
+    ``per_second``; 0 without times, ``inf`` for ``None``."""
+    if per_second is None:
+        return float("inf")
+    if cameras.times is None or len(cameras) < 2:
+        return 0.0
+    t = np.asarray(cameras.times, dtype=float)
+    f = len(t)
+    duration = (float(t.max()) - float(t.min())) * f / (f - 1)
+    return per_second * duration * (1.0 + 1e-9)
 
 
 def _choice_score(
