@@ -53,7 +53,9 @@ Final21 (defined in session 25 before it was run): every clip at 30 Hz on the ph
 Final22 (defined in session 26 before it was run): every clip at 40 Hz from frames 41 and 71,
 and 85_02 also from 241 and 541. Final23 (defined in session 27 before it was run): every
 clip at 24 Hz from frames 17 and 37, at 30 Hz from 47 and at 60 Hz from 45; 85_02 also at
-20 Hz from 103 and 403.
+20 Hz from 103 and 403. Final24 (defined in session 28 before it was run): every clip at 30 Hz
+from frames 33 and 65 and at 120 Hz from 99 and 201; 85_02 also at 20 Hz from 203 and 353
+and at 17.1 Hz (every seventh frame) from 11 and 381.
 "robust-angles" (session 25) adds angle priors (angle_priors): per joint, the range of the
 angle between its bone and its parent's bone (with a grandparent) and each sibling's bone
 (other children of its parent) over every frame of the other trial's clips (131_01* judged by
@@ -480,6 +482,7 @@ PARTS = (
     "final21",
     "final22",
     "final23",
+    "final24",
 )
 # Session 8's never-seen cuts: every clip sampled at 40 Hz (every third frame) from
 # frames 10 and 100, 60 frames each (the other parts sample every second frame).
@@ -527,6 +530,12 @@ FINAL22_STEP, FINAL22_OFFSETS, FINAL22_C3D_OFFSETS = 3, (41, 71), (241, 541)
 # from frames 103 and 403.
 FINAL23_CUTS = ((5, 17), (5, 37), (4, 47), (2, 45))
 FINAL23_C3D_CUTS = ((6, 103), (6, 403))
+# Session 28's never-seen cuts (defined before they were run): every clip at 30 Hz from
+# frames 33 and 65 and at 120 Hz (every frame, 0.5 s windows) from frames 99 and 201 where 60
+# frames fit; 85_02 also at 20 Hz from frames 203 and 353 and at 17.1 Hz (every seventh
+# frame, 3.5 s windows: a rate no other part uses) from frames 11 and 381.
+FINAL24_CUTS = ((4, 33), (4, 65), (1, 99), (1, 201))
+FINAL24_C3D_CUTS = ((6, 203), (6, 353), (7, 11), (7, 381))
 
 
 def load_clips() -> dict[str, tuple[np.ndarray, list[tuple[int, int]]]]:
@@ -606,6 +615,8 @@ def all_windows(
     wins += cut("final22", at(FINAL22_STEP, FINAL22_C3D_OFFSETS), c3d)
     wins += cut("final23", FINAL23_CUTS)
     wins += cut("final23", FINAL23_C3D_CUTS, c3d)
+    wins += cut("final24", FINAL24_CUTS)
+    wins += cut("final24", FINAL24_C3D_CUTS, c3d)
     return wins
 
 
