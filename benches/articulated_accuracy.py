@@ -55,7 +55,9 @@ and 85_02 also from 241 and 541. Final23 (defined in session 27 before it was ru
 clip at 24 Hz from frames 17 and 37, at 30 Hz from 47 and at 60 Hz from 45; 85_02 also at
 20 Hz from 103 and 403. Final24 (defined in session 28 before it was run): every clip at 30 Hz
 from frames 33 and 65 and at 120 Hz from 99 and 201; 85_02 also at 20 Hz from 203 and 353
-and at 17.1 Hz (every seventh frame) from 11 and 381.
+and at 17.1 Hz (every seventh frame) from 11 and 381. Final25 (defined in session 28 before it
+was run, after final24's first run): every clip at 40 Hz from frames 5 and 59 and at 60 Hz from
+75 and 135; 85_02 also at 24 Hz from 133 and 433.
 "robust-angles" (session 25) adds angle priors (angle_priors): per joint, the range of the
 angle between its bone and its parent's bone (with a grandparent) and each sibling's bone
 (other children of its parent) over every frame of the other trial's clips (131_01* judged by
@@ -395,6 +397,15 @@ METHOD_OPTIONS: dict[str, dict] = {
     "robust-rigid": {"method": "robust"},
     "robust-kbic": {"method": "robust", "k_alternatives": (12, 16), "k_per_second": None},
     "robust-kgate": {"method": "robust", "k_alternatives": (12, 16), "k_per_second": 8.0},
+    **{
+        f"robust-cap{c:g}": {
+            "method": "robust",
+            "k_alternatives": (12, 16),
+            "k_per_second": 8.0,
+            "angle_cap": float(c),
+        }
+        for c in (1, 4, 16)
+    },
 }
 # Every method before session 28 runs at k = 8 only; the library default since then also
 # tries k = 12 and 16 where the window spans 1.5 s or more (robust-kgate).
@@ -412,6 +423,7 @@ PRIOR_METHODS: dict[str, tuple[str, ...]] = {
     "robust-rigid": ("bend", "siblings", "rigid"),
     "robust-kbic": ("bend", "siblings", "rigid"),
     "robust-kgate": ("bend", "siblings", "rigid"),
+    **{f"robust-cap{c:g}": ("bend", "siblings", "rigid") for c in (1, 4, 16)},
 }
 # learn_angle_ranges(rigid=RIGID): points whose distances to the joint and its parent vary by
 # less than 8 % (std / mean) count as rigid with them.
@@ -487,6 +499,7 @@ PARTS = (
     "final22",
     "final23",
     "final24",
+    "final25",
 )
 # Session 8's never-seen cuts: every clip sampled at 40 Hz (every third frame) from
 # frames 10 and 100, 60 frames each (the other parts sample every second frame).
@@ -540,6 +553,11 @@ FINAL23_C3D_CUTS = ((6, 103), (6, 403))
 # frame, 3.5 s windows: a rate no other part uses) from frames 11 and 381.
 FINAL24_CUTS = ((4, 33), (4, 65), (1, 99), (1, 201))
 FINAL24_C3D_CUTS = ((6, 203), (6, 353), (7, 11), (7, 381))
+# Session 28's second never-seen cuts (defined before they were run, for the change made
+# after final24 was first run): every clip at 40 Hz from frames 5 and 59 and at 60 Hz from
+# frames 75 and 135 where 60 frames fit; 85_02 also at 24 Hz from frames 133 and 433.
+FINAL25_CUTS = ((3, 5), (3, 59), (2, 75), (2, 135))
+FINAL25_C3D_CUTS = ((5, 133), (5, 433))
 
 
 def load_clips() -> dict[str, tuple[np.ndarray, list[tuple[int, int]]]]:
@@ -621,6 +639,8 @@ def all_windows(
     wins += cut("final23", FINAL23_C3D_CUTS, c3d)
     wins += cut("final24", FINAL24_CUTS)
     wins += cut("final24", FINAL24_C3D_CUTS, c3d)
+    wins += cut("final25", FINAL25_CUTS)
+    wins += cut("final25", FINAL25_C3D_CUTS, c3d)
     return wins
 
 

@@ -956,6 +956,8 @@ def test_bad_angle_priors_are_refused_by_name(scene: Scene) -> None:
         (dict(k_alternatives=12), r"^k_alternatives: expected a tuple"),
         (dict(k_alternatives=(12, 0)), r"^k_alternatives\[1\]"),
         (dict(k_per_second=0.0), r"^k_per_second"),
+        (dict(angle_cap=0.0), r"^angle_cap"),
+        (dict(angle_cap=float("inf")), r"^angle_cap"),
         (dict(k_per_second=float("nan")), r"^k_per_second"),
     ):
         with pytest.raises(ValueError, match=message):

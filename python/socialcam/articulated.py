@@ -357,6 +357,12 @@ class ArticulatedOptions:
         ranges the capture never leaves; at 0.5 (default) the bench's mean error drops by
         about 15 %. Ranges learned from another capture that miss the true angles pull the
         bone off them: at exact length and root the error then rises slightly.
+    angle_cap : robust method, with angle priors: each frame's ``(e_t / angle_tolerance)²``
+        counts at most this much (> 0), in the selection score and in the ``k_alternatives``
+        choice, and beyond ``angle_tolerance × √angle_cap`` a frame no longer pulls the
+        refinement (``angle_refine``): a truncated quadratic. ``None``: no cap. A range
+        learned from another capture may miss a whole window's true angles by tens of
+        degrees; uncapped, such a prior outweighs any evidence of the pixels.
     k_alternatives : robust method: other basis sizes to run the whole reconstruction with
         (each ≥ 1; a size above the number of frames is skipped); the result whose final
         fit has the lowest Bayesian information criterion ``2n ln(c / 2n) + (2k' + 1) ln 2n``
@@ -405,6 +411,7 @@ class ArticulatedOptions:
     angle_tolerance: float = float(np.radians(5.0))
     prior_start: bool = True
     angle_refine: float = 0.5
+    angle_cap: float | None = None
     k_alternatives: tuple[int, ...] = (12, 16)
     k_per_second: float | None = 8.0
     max_iter: int = 100
@@ -428,6 +435,8 @@ class ArticulatedOptions:
         check_float(self.length_weight, "length_weight", min=0.0, max=1e6)
         check_float(self.angle_weight, "angle_weight", min=0.0, max=1e6)
         check_float(self.angle_refine, "angle_refine", min=0.0, max=1e6)
+        if self.angle_cap is not None:
+            check_float(self.angle_cap, "angle_cap", min=0.0, max=1e12, min_exclusive=True)
         check_float(
             self.angle_tolerance, "angle_tolerance", min=0.0, max=float(np.pi), min_exclusive=True
         )
@@ -566,7 +575,7 @@ def reconstruct_articulated(
         )
         if len(sizes) == 1:
             return _traj(d, t)
-        score = _choice_score(d, p_, priors, opts.angle_tolerance)
+        score = _choice_score(d, p_, priors, opts.angle_tolerance, opts.angle_cap)
         if best is None or score < best[0]:
             best = (score, d)
     assert best is not None
@@ -592,9 +601,11 @@ def _choice_score(
     parent: FloatArray,
     priors: list[tuple[FloatArray, float, float]],
     tolerance: float,
+    cap: float | None = None,
 ) -> float:
     """The score of ``k_alternatives``: BIC of the final fit (as the Rust core's
-    ``refinement_bic``) plus the angle priors' excess, ``Σ (e / tolerance)²``."""
+    ``refinement_bic``) plus the angle priors' excess, ``Σ min((e / tolerance)², cap)``
+    (``angle_cap``)."""
     n_obs = int(d["n_observed"])
     n = max(2 * n_obs, 1)
     cost = max(float(d["reprojection_rms"]) ** 2 * n_obs, np.finfo(float).tiny)
@@ -605,7 +616,8 @@ def _choice_score(
         a = _vector_angles(bone, ref)
         a = a[np.isfinite(a)]
         e = np.maximum(lo - a, 0.0) + np.maximum(a - hi, 0.0)
-        score += float(((e / tolerance) ** 2).sum())
+        u = (e / tolerance) ** 2
+        score += float((u if cap is None else np.minimum(u, cap)).sum())
     return float(score)
 
 

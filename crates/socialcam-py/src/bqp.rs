@@ -212,6 +212,8 @@ struct PyArticulatedOptions {
     #[pyo3(attribute)]
     angle_refine: f64,
     #[pyo3(attribute)]
+    angle_cap: Option<f64>,
+    #[pyo3(attribute)]
     max_iter: usize,
     #[pyo3(attribute)]
     time_limit: Option<f64>,
@@ -249,6 +251,7 @@ fn art_options(o: &PyArticulatedOptions) -> PyResult<ArticulatedOptions> {
         angle_tolerance: o.angle_tolerance,
         prior_start: o.prior_start,
         angle_refine: o.angle_refine,
+        angle_cap: o.angle_cap.unwrap_or(f64::INFINITY),
         lm: socialcore::geometry::LmOptions {
             max_iterations: o.max_iter,
             ..defaults.lm

@@ -207,6 +207,12 @@ pub struct ArticulatedOptions {
     /// frame's excess `e` beyond each prior's range as a residual of
     /// `angle_refine · e / angle_tolerance` pixels (≥ 0; 0 leaves Eq 4.5 alone).
     pub angle_refine: f64,
+    /// Robust method, with [`AnglePrior`]s: each frame's `(e_t / angle_tolerance)²` in the
+    /// selection score is capped at this value (> 0; `+∞` = no cap), and beyond
+    /// `angle_tolerance · √angle_cap` a frame no longer pulls the refinement (a truncated
+    /// quadratic). A range learned from another capture may miss the true angles of a whole
+    /// window by tens of degrees; uncapped, that prior then outweighs any pixel evidence.
+    pub angle_cap: f64,
 }
 
 impl Default for ArticulatedOptions {
@@ -235,6 +241,7 @@ impl Default for ArticulatedOptions {
             angle_tolerance: ANGLE_TOLERANCE,
             prior_start: true,
             angle_refine: ANGLE_REFINE,
+            angle_cap: f64::INFINITY,
         }
     }
 }
@@ -818,9 +825,10 @@ struct Fit<'a> {
     frame: Matrix3<f64>,
     /// Prior on the bone length `(r0, w)`: adds `(w (r − r0) / r0)²` to the cost.
     prior: Option<(f64, f64)>,
-    /// Angle priors read by the refinement, `(priors, s)`: each frame's excess `e` beyond a
-    /// range adds `(s e)²` to the objective [`refine`] minimises (not to [`Fit::cost`]).
-    angles: Option<(&'a [AnglePrior], f64)>,
+    /// Angle priors read by the refinement, `(priors, s, e_max)`: each frame's excess `e`
+    /// beyond a range adds `(s min(e, e_max))²` to the objective [`refine`] minimises (not to
+    /// [`Fit::cost`]); beyond `e_max` the frame no longer pulls.
+    angles: Option<(&'a [AnglePrior], f64, f64)>,
 }
 
 impl Fit<'_> {
@@ -845,9 +853,10 @@ impl Fit<'_> {
                 .map_or(0.0, |(r0, w)| (w * (r - r0) / r0).powi(2))
     }
 
-    /// The angle priors' term of the refinement objective, `Σ_t Σ_priors (s e_t)²`.
+    /// The angle priors' term of the refinement objective, `Σ_t Σ_priors (s min(e_t,
+    /// e_max))²`.
     fn angle_cost(&self, at: &DVector<f64>, ap: &DVector<f64>) -> f64 {
-        let Some((priors, s)) = self.angles else {
+        let Some((priors, s, e_max)) = self.angles else {
             return 0.0;
         };
         let points: Vec<Vector3<f64>> = (0..self.parent.len())
@@ -858,7 +867,7 @@ impl Fit<'_> {
             .map(|p| {
                 angle_excess(&points, self.parent, &p.reference, p.range)
                     .iter()
-                    .map(|e| (s * e).powi(2))
+                    .map(|e| (s * e.min(e_max)).powi(2))
                     .sum::<f64>()
             })
             .sum()
@@ -1108,6 +1117,12 @@ pub fn reconstruct_articulated_prior(
             format!("must be positive and finite, got {}", opts.angle_tolerance),
         ));
     }
+    if opts.angle_cap.is_nan() || opts.angle_cap <= 0.0 {
+        return Err(Error::invalid(
+            "angle_cap",
+            format!("must be positive (+inf: no cap), got {}", opts.angle_cap),
+        ));
+    }
     for (c, child) in children.iter().enumerate() {
         if child.pixels.len() != cameras.len() {
             return Err(Error::invalid(
@@ -1224,7 +1239,11 @@ pub fn reconstruct_articulated_prior(
     // angle_tolerance, pixels.
     let angles =
         (robust && opts.angle_refine > 0.0 && opts.angle_weight > 0.0 && !priors.is_empty())
-            .then_some((priors, opts.angle_refine / opts.angle_tolerance));
+            .then_some((
+                priors,
+                opts.angle_refine / opts.angle_tolerance,
+                opts.angle_tolerance * opts.angle_cap.sqrt(),
+            ));
     // Orthonormal basis of the observed rows of Θ, for the roughness of Eq 4.12.
     let theta_obs = DMatrix::from_fn(m, opts.k, |a, j| theta[(rays.frames[a], j)]);
     let q1 = observed_basis(&theta_obs)?;
@@ -1297,7 +1316,7 @@ pub fn reconstruct_articulated_prior(
                     opts.angle_weight
                         * excess
                             .iter()
-                            .map(|e| (e / opts.angle_tolerance).powi(2))
+                            .map(|e| (e / opts.angle_tolerance).powi(2).min(opts.angle_cap))
                             .sum::<f64>()
                         / f.max(1) as f64
                 })
@@ -1589,7 +1608,7 @@ fn refine(
             jtr.axpy(ru, &jrow_u, 1.0);
             jtr.axpy(rv, &jrow_v, 1.0);
         }
-        if let Some((priors, s)) = fit.angles {
+        if let Some((priors, s, e_max)) = fit.angles {
             // Each frame's excess beyond a range: e = lo − α or α − hi, α the angle between
             // the unit direction and the reference; ∂α/∂q = −(b̂ · ∂u/∂q) / sin α.
             let mut jrow = DVector::<f64>::zeros(np);
@@ -1609,7 +1628,7 @@ fn refine(
                     let Some((e, sign)) = range_excess(alpha, p.range) else {
                         continue;
                     };
-                    if sin < 1e-9 {
+                    if sin < 1e-9 || e > e_max {
                         continue;
                     }
                     let (gt, gp) = (-b.dot(&dth) / sin, -b.dot(&dph) / sin);

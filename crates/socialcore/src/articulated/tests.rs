@@ -812,4 +812,11 @@ fn angle_priors_are_checked_and_ignored_at_weight_zero() {
         ..o
     };
     bad(prior.clone(), &pull, "angle_refine");
+    for cap in [0.0, -1.0, f64::NAN] {
+        let capped = ArticulatedOptions {
+            angle_cap: cap,
+            ..o
+        };
+        bad(prior.clone(), &capped, "angle_cap");
+    }
 }
