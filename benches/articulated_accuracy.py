@@ -92,7 +92,9 @@ priors' excess kept: a basis chosen to the window's motion (the thesis chooses K
 (k_per_second = 8): 60 Hz windows (1 s) keep k = 8, 40 Hz (1.5 s) try 12, 30 Hz and slower
 (2 s and more) 12 and 16. Since session 28 the cameras' times are in seconds (frame / 120 Hz
 × step; before: frame / 60 whatever the step); the DCT basis does not depend on the time unit
-(dev, seed 0: identical figures).
+(dev, seed 0: identical figures). "robust-cap1/4/9/16" (session 28, off by default in the
+library) are robust-kgate with angle_cap = 1, 4, 9, 16: each frame's prior excess counts at
+most that many tolerances² and stops pulling the refinement beyond √cap tolerances.
 Run: python benches/articulated_accuracy.py [--quick | --full] [--parts dev,fresh,...]
 [--methods robust,thesis] [--skeleton] [--static-camera]
 """
@@ -404,13 +406,14 @@ METHOD_OPTIONS: dict[str, dict] = {
             "k_per_second": 8.0,
             "angle_cap": float(c),
         }
-        for c in (1, 4, 16)
+        for c in (1, 4, 9, 16)
     },
 }
 # Every method before session 28 runs at k = 8 only; the library default since then also
 # tries k = 12 and 16 where the window spans 1.5 s or more (robust-kgate).
 for _opts in METHOD_OPTIONS.values():
     _opts.setdefault("k_alternatives", ())
+    _opts.setdefault("angle_cap", None)
 # Methods given angle priors (BVH clips): the ranges learned with learn_angle_ranges over
 # every frame of the OTHER trial's clips (131_01* judged by 131_02* and the reverse; same
 # subject, so optimistic for other people): "bend" the angle to the parent's bone (joints
@@ -423,7 +426,7 @@ PRIOR_METHODS: dict[str, tuple[str, ...]] = {
     "robust-rigid": ("bend", "siblings", "rigid"),
     "robust-kbic": ("bend", "siblings", "rigid"),
     "robust-kgate": ("bend", "siblings", "rigid"),
-    **{f"robust-cap{c:g}": ("bend", "siblings", "rigid") for c in (1, 4, 16)},
+    **{f"robust-cap{c:g}": ("bend", "siblings", "rigid") for c in (1, 4, 9, 16)},
 }
 # learn_angle_ranges(rigid=RIGID): points whose distances to the joint and its parent vary by
 # less than 8 % (std / mean) count as rigid with them.

@@ -805,6 +805,47 @@ def test_basis_sizes_are_tried_up_to_k_per_second_of_the_window() -> None:
             np.testing.assert_array_equal(gated, size[16] if rate == 20.0 else size[8])
 
 
+def test_angle_cap_frees_a_joint_from_ranges_that_miss_its_window() -> None:
+    # CMU 131_01 starting to walk, frames 201-260 at 120 Hz (0.5 s), exact parent and
+    # length, 0.5 px noise, every prior learned from the other trial (bend, siblings, rigid
+    # points). Those ranges miss these frames' true angles by 10-40 deg (RightKnee's bend
+    # range 15.9-53.4 deg, true 55-73), which outweighs the pixels: the reconstruction
+    # takes the impostor and the refinement pulls it into the wrong ranges (without priors:
+    # 0.01-0.03). angle_cap = 9 counts each frame at most 3 tolerances (15 deg) out and stops
+    # pulling beyond. Measured seeds 0-2: RightKnee 1.02 -> 0.02, LeftAnkle 0.56 -> 0.02.
+    m = load_bvh(DATA / "mocap" / "cmu_131_01_start300.bvh")
+    skeleton, keep = sc.Skeleton.from_bvh(m)
+    ranges = _trial_ranges("02", skeleton, keep, rigid=0.08)
+    P = m.positions[201:261][:, keep]
+    cams, px = _orbit(P, P.mean(axis=1), rate=120.0)
+    for name in ("RightKnee", "LeftAnkle"):
+        j = skeleton.index(name)
+        p = skeleton.parents[j]
+        priors = [
+            (P[:, b] - P[:, a], lohi)
+            for (jj, a, b), lohi in ranges.items()
+            if jj == j and p in (a, b)
+        ]
+        assert len(priors) >= 8
+        r = float(np.linalg.norm(P[:, j] - P[:, p], axis=1).mean())
+        den = float(np.linalg.norm(P[:, j] - P[:, p]))
+        for seed in range(3):
+            x = px[:, j] + np.random.default_rng(seed * 100 + j).normal(0, 0.5, (60, 2))
+            e = {
+                cap: float(
+                    np.linalg.norm(
+                        sc.reconstruct_articulated(
+                            x, cams, P[:, p], r, angle_priors=priors, angle_cap=cap
+                        ).points
+                        - P[:, j]
+                    )
+                    / den
+                )
+                for cap in (None, 9.0)
+            }
+            assert e[None] > 0.4 and e[9.0] < 0.05, (name, seed, e)
+
+
 def test_the_priors_own_start_reaches_a_hip_the_flips_miss() -> None:
     # Fig 4.3(c) conditions, every prior of the bench's robust-rigid (bend, siblings and
     # points rigid with the joint and its parent, learned from the other trial with

@@ -691,6 +691,8 @@ fn the_refinement_pulls_the_bone_into_the_priors_range() {
     let run = |w: f64| {
         let o = ArticulatedOptions {
             angle_refine: w,
+            // the pull itself, on every frame however far out
+            angle_cap: f64::INFINITY,
             ..opts(6)
         };
         reconstruct_articulated_prior(
