@@ -494,7 +494,9 @@ def reconstruct_articulated(
     ----------
     x : (F, 2) pixels of the child in ``cameras[i]`` (one camera per frame); NaN rows are
         missing and get imputed by the basis.
-    cameras : ``F`` cameras with their ``times`` (frame indices when ``times`` is None).
+    cameras : ``F`` cameras with their ``times`` in seconds (frame indices when ``times`` is
+        None). The window's duration sets which ``k_alternatives`` are tried
+        (``k_per_second``): give true times, or a slow-rate window is fitted at ``k`` only.
     parent : (F, 3) parent positions, metres, every frame.
     length : bone length in metres (> 0); see :class:`ArticulatedOptions` for how it is
         enlarged (thesis) or refined (robust method).
