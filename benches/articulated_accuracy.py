@@ -376,6 +376,8 @@ def run_skeleton(
     return float(np.linalg.norm(cache[top, j] - cache[top, p] - d) / np.linalg.norm(d))
 
 
+# angle_cap values of the robust-cap methods (session 28).
+CAPS = (1, 4, 9, 16)
 METHOD_OPTIONS: dict[str, dict] = {
     "thesis": {"method": "thesis"},
     "robust-mincost": {
@@ -399,16 +401,10 @@ METHOD_OPTIONS: dict[str, dict] = {
     "robust-rigid": {"method": "robust"},
     "robust-kbic": {"method": "robust", "k_alternatives": (12, 16), "k_per_second": None},
     "robust-kgate": {"method": "robust", "k_alternatives": (12, 16), "k_per_second": 8.0},
-    **{
-        f"robust-cap{c:g}": {
-            "method": "robust",
-            "k_alternatives": (12, 16),
-            "k_per_second": 8.0,
-            "angle_cap": float(c),
-        }
-        for c in (1, 4, 9, 16)
-    },
 }
+METHOD_OPTIONS.update(
+    {f"robust-cap{c:g}": {**METHOD_OPTIONS["robust-kgate"], "angle_cap": float(c)} for c in CAPS}
+)
 # Every method before session 28 runs at k = 8 only; the library default since then also
 # tries k = 12 and 16 where the window spans 1.5 s or more (robust-kgate).
 for _opts in METHOD_OPTIONS.values():
@@ -426,7 +422,7 @@ PRIOR_METHODS: dict[str, tuple[str, ...]] = {
     "robust-rigid": ("bend", "siblings", "rigid"),
     "robust-kbic": ("bend", "siblings", "rigid"),
     "robust-kgate": ("bend", "siblings", "rigid"),
-    **{f"robust-cap{c:g}": ("bend", "siblings", "rigid") for c in (1, 4, 9, 16)},
+    **{f"robust-cap{c:g}": ("bend", "siblings", "rigid") for c in CAPS},
 }
 # learn_angle_ranges(rigid=RIGID): points whose distances to the joint and its parent vary by
 # less than 8 % (std / mean) count as rigid with them.

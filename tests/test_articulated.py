@@ -614,14 +614,14 @@ def _trial_ranges(
 
 
 def _clip_window(
-    name: str, offset: int = 0
+    name: str, offset: int = 0, step: int = 2
 ) -> tuple[np.ndarray, sc.Skeleton, list[int], sc.Cameras, np.ndarray]:
-    """CMU ``name`` frames ``offset``, ``offset`` + 2, … (60 frames), seen as in the bench:
-    ``(P, skeleton, keep, cameras, pixels)``."""
+    """CMU ``name`` (120 Hz) frames ``offset``, ``offset`` + ``step``, … (60 frames, at
+    120 / ``step`` Hz), seen as in the bench: ``(P, skeleton, keep, cameras, pixels)``."""
     m = load_bvh(DATA / "mocap" / name)
     skeleton, keep = sc.Skeleton.from_bvh(m)
-    P = m.positions[offset::2][:60][:, keep]
-    cams, px = _orbit(P, P.mean(axis=1))
+    P = m.positions[offset::step][:60][:, keep]
+    cams, px = _orbit(P, P.mean(axis=1), rate=120.0 / step)
     return P, skeleton, keep, cams, px
 
 
@@ -813,11 +813,8 @@ def test_angle_cap_frees_a_joint_from_ranges_that_miss_its_window() -> None:
     # takes the impostor and the refinement pulls it into the wrong ranges (without priors:
     # 0.01-0.03). angle_cap = 9 counts each frame at most 3 tolerances (15 deg) out and stops
     # pulling beyond. Measured seeds 0-2: RightKnee 1.02 -> 0.02, LeftAnkle 0.56 -> 0.02.
-    m = load_bvh(DATA / "mocap" / "cmu_131_01_start300.bvh")
-    skeleton, keep = sc.Skeleton.from_bvh(m)
+    P, skeleton, keep, cams, px = _clip_window("cmu_131_01_start300.bvh", 201, step=1)
     ranges = _trial_ranges("02", skeleton, keep, rigid=0.08)
-    P = m.positions[201:261][:, keep]
-    cams, px = _orbit(P, P.mean(axis=1), rate=120.0)
     for name in ("RightKnee", "LeftAnkle"):
         j = skeleton.index(name)
         p = skeleton.parents[j]

@@ -1236,14 +1236,12 @@ pub fn reconstruct_articulated_prior(
         )
     });
     // Angle priors inside the refinement (robust method): residual angle_refine · e /
-    // angle_tolerance, pixels.
+    // angle_tolerance, pixels. A frame's excess counts at most e_max (angle_cap), here and
+    // in the selection score.
+    let e_max = opts.angle_tolerance * opts.angle_cap.sqrt();
     let angles =
         (robust && opts.angle_refine > 0.0 && opts.angle_weight > 0.0 && !priors.is_empty())
-            .then_some((
-                priors,
-                opts.angle_refine / opts.angle_tolerance,
-                opts.angle_tolerance * opts.angle_cap.sqrt(),
-            ));
+            .then_some((priors, opts.angle_refine / opts.angle_tolerance, e_max));
     // Orthonormal basis of the observed rows of Θ, for the roughness of Eq 4.12.
     let theta_obs = DMatrix::from_fn(m, opts.k, |a, j| theta[(rays.frames[a], j)]);
     let q1 = observed_basis(&theta_obs)?;
@@ -1316,7 +1314,7 @@ pub fn reconstruct_articulated_prior(
                     opts.angle_weight
                         * excess
                             .iter()
-                            .map(|e| (e / opts.angle_tolerance).powi(2).min(opts.angle_cap))
+                            .map(|e| (e.min(e_max) / opts.angle_tolerance).powi(2))
                             .sum::<f64>()
                         / f.max(1) as f64
                 })
