@@ -4,6 +4,7 @@ from __future__ import annotations
 
 import itertools
 from pathlib import Path
+from typing import Any
 
 import numpy as np
 import pytest
@@ -602,7 +603,7 @@ def test_bad_children_are_refused_by_name() -> None:
 
 # --------------------------------------- robust method, angle priors (issue 12, session 25)
 def _trial_ranges(
-    trial: str, skeleton: sc.Skeleton, keep: list[int], **kinds: bool
+    trial: str, skeleton: sc.Skeleton, keep: list[int], **kinds: Any
 ) -> dict[tuple[int, int, int], tuple[float, float]]:
     """Angle priors (radians) learned from every clip of CMU 131 trial ``trial``."""
     clips = [
@@ -843,6 +844,51 @@ def test_angle_cap_frees_a_joint_from_ranges_that_miss_its_window() -> None:
             assert e[None] > 0.4 and e[9.0] < 0.05, (name, seed, e)
 
 
+def test_steady_keeps_only_rigid_points_whose_angle_holds() -> None:
+    # learn_angle_ranges(rigid=) tests distances: a point far from a short bone keeps them
+    # within a few per cent while the angle at the parent swings. steady= also tests the
+    # angle. A toy first: a 0.1 m bone swinging +-30 deg about its parent, a point 2 m away
+    # (distances vary by < 3 %) and a partner rigid with the bone.
+    t = np.linspace(0.0, 2.0 * np.pi, 200)
+    F = t.size
+    swing = np.radians(30.0) * np.sin(t)
+    P = np.zeros((F, 4, 3))
+    P[:, 1] = np.stack([0.1 * np.sin(swing), -0.1 * np.cos(swing), np.zeros(F)], axis=1)
+    P[:, 2] = [0.0, 2.0, 0.0]
+    P[:, 3] = 0.5 * P[:, 1] + np.stack([0.02 * np.cos(swing), 0.02 * np.sin(swing), 0 * t], 1)
+    d = np.linalg.norm(P[:, 2] - P[:, 1], axis=1)
+    assert d.std() / d.mean() < 0.03
+    parents = [-1, 0, 0, 0]
+    kw = {"bend": False, "siblings": False, "rigid": 0.08}
+    assert {(1, 0, 2), (1, 0, 3)} <= set(sc.learn_angle_ranges(P, parents, **kw))
+    r = sc.learn_angle_ranges(P, parents, steady=0.08, **kw)
+    assert (1, 0, 3) in r and (1, 0, 2) not in r
+    assert r[1, 0, 3][1] - r[1, 0, 3][0] < np.radians(1.0)
+    # On real motion: CMU 131_01 starting to walk, frames 201-260 at 120 Hz, RightKnee with
+    # every prior learned from the other trial (exact parent and length, 0.5 px noise). The
+    # distance test admits 9 points of the trunk and arms whose ranges (30-75 deg wide, from
+    # the other trial's walking postures) these frames' true angles miss by up to 45 deg:
+    # measured 1.02 (seeds 0-2). With steady=0.08 only the root stays besides the bend
+    # range: 0.014 0.015 0.032.
+    P, skeleton, keep, cams, px = _clip_window("cmu_131_01_start300.bvh", 201, step=1)
+    j = skeleton.index("RightKnee")
+    p = skeleton.parents[j]
+    r_ = float(np.linalg.norm(P[:, j] - P[:, p], axis=1).mean())
+    den = float(np.linalg.norm(P[:, j] - P[:, p]))
+    for steady, ok in ((None, False), (0.08, True)):
+        ranges = _trial_ranges("02", skeleton, keep, rigid=0.08, steady=steady)
+        priors = [
+            (P[:, b] - P[:, a], lohi)
+            for (jj, a, b), lohi in ranges.items()
+            if jj == j and p in (a, b)
+        ]
+        for seed in range(3):
+            x = px[:, j] + np.random.default_rng(seed * 100 + j).normal(0, 0.5, (60, 2))
+            out = sc.reconstruct_articulated(x, cams, P[:, p], r_, angle_priors=priors)
+            e = float(np.linalg.norm(out.points - P[:, j]) / den)
+            assert (e < 0.06) == ok, (steady, seed, e)
+
+
 def test_the_priors_own_start_reaches_a_hip_the_flips_miss() -> None:
     # Fig 4.3(c) conditions, every prior of the bench's robust-rigid (bend, siblings and
     # points rigid with the joint and its parent, learned from the other trial with
@@ -1006,6 +1052,9 @@ def test_bad_angle_priors_are_refused_by_name(scene: Scene) -> None:
         sc.learn_angle_ranges(scene.P, sk.parents, quantiles=(0.9, 0.1))
     with pytest.raises(ValueError, match=r"^rigid"):
         sc.learn_angle_ranges(scene.P, sk.parents, rigid=-0.1)
+    for bad in (0.0, -0.1, float("nan")):
+        with pytest.raises(ValueError, match=r"^steady"):
+            sc.learn_angle_ranges(scene.P, sk.parents, rigid=0.08, steady=bad)
     with pytest.raises(ValueError, match=r"^positions: expected shape"):
         sc.learn_angle_ranges(scene.P[:, :3], sk.parents)
     with pytest.raises(ValueError, match=r"^bone: expected two joint indices"):

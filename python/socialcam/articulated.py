@@ -898,6 +898,21 @@ def _vector_angles(u: FloatArray, v: FloatArray) -> FloatArray:
     return out
 
 
+def _angle_spread(clips: list[Any], p: int, j: int, qs: list[int]) -> FloatArray:
+    """(len(qs),) standard deviation, radians, over every clip's frames, of the angle at
+    ``p`` between the bone ``p → j`` and ``p → q`` for each ``q`` (frames with a gap left
+    out; NaN where fewer than two frames are left)."""
+    X = np.concatenate(clips)
+    u = np.repeat(X[:, j] - X[:, p], len(qs), axis=0)
+    v = (X[:, qs] - X[:, p : p + 1]).reshape(-1, 3)
+    ang = _vector_angles(u, v).reshape(-1, len(qs))  # (F, n)
+    seen = np.isfinite(ang)
+    k = seen.sum(axis=0)
+    mean = np.where(seen, ang, 0.0).sum(axis=0) / np.maximum(k, 1)
+    var = (np.where(seen, ang - mean, 0.0) ** 2).sum(axis=0) / np.maximum(k, 1)
+    return np.where(k > 1, np.sqrt(var), np.nan)
+
+
 def learn_angle_ranges(
     positions: npt.ArrayLike | Sequence[npt.ArrayLike],
     parents: Sequence[int],
@@ -907,6 +922,7 @@ def learn_angle_ranges(
     rigid: float = 0.0,
     quantiles: tuple[float, float] = (0.0, 1.0),
     margin: float = 0.0,
+    steady: float | None = None,
 ) -> dict[tuple[int, int, int], tuple[float, float]]:
     """Angle priors for :func:`reconstruct_articulated` learned from motion capture.
 
@@ -924,6 +940,14 @@ def learn_angle_ranges(
         (standard deviation over mean, over every frame given): the three move as one rigid
         body, so the angle at the parent is nearly constant. Made for optical marker sets,
         whose markers have no anatomy but sit in groups on one segment (e.g. 0.08).
+    steady : if given (radians), a ``rigid`` point is kept only if the angle itself at the
+        parent, between the bone and the point, varies by less than ``steady`` (standard
+        deviation over every frame given). Distances alone let through a point far from a
+        short bone whose angle swings by tens of degrees (the head seen from the hip as the
+        thigh swings): a range that holds for the poses of the capture it was learned from
+        and misses other activities. Give it (e.g. 0.08) when the ranges come from another
+        capture than the one reconstructed; leave it out for a calibration capture of the
+        same session.
     quantiles : the range's ends as quantiles of the angle over every frame (the default,
         min and max).
     margin : radians added on both sides (≥ 0), the range then clipped to [0, π].
@@ -952,6 +976,7 @@ def learn_angle_ranges(
         raise ValueError(f"quantiles: need lo <= hi, got {quantiles}")
     m = check_float(margin, "margin", min=0.0, max=float(np.pi))
     tol = check_float(rigid, "rigid", min=0.0)
+    sd_max = None if steady is None else check_float(steady, "steady", min=0.0, min_exclusive=True)
     spread = np.full((J, J), np.inf)
     if tol > 0:
         # Relative spread (std / mean) of every pairwise distance over all frames, frames
@@ -979,11 +1004,16 @@ def learn_angle_ranges(
         if siblings:
             keys += [(j, p, s) for s, ps in enumerate(parents_) if ps == p and s != j]
         if tol > 0:
-            keys += [
-                (j, p, q)
-                for q in range(J)
-                if q not in (j, p) and spread[q, p] < tol and spread[q, j] < tol
+            qs = [
+                q for q in range(J) if q not in (j, p) and spread[q, p] < tol and spread[q, j] < tol
             ]
+            if sd_max is not None and qs:
+                qs = [
+                    q
+                    for q, sd in zip(qs, _angle_spread(clips, p, j, qs), strict=True)
+                    if sd < sd_max
+                ]
+            keys += [(j, p, q) for q in qs]
     keys = list(dict.fromkeys(keys))
     out: dict[tuple[int, int, int], tuple[float, float]] = {}
     for j, a, b in keys:
