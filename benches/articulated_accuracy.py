@@ -57,7 +57,9 @@ clip at 24 Hz from frames 17 and 37, at 30 Hz from 47 and at 60 Hz from 45; 85_0
 from frames 33 and 65 and at 120 Hz from 99 and 201; 85_02 also at 20 Hz from 203 and 353
 and at 17.1 Hz (every seventh frame) from 11 and 381. Final25 (defined in session 28 before it
 was run, after final24's first run): every clip at 40 Hz from frames 5 and 59 and at 60 Hz from
-75 and 135; 85_02 also at 24 Hz from 133 and 433.
+75 and 135; 85_02 also at 24 Hz from 133 and 433. Final26 (defined in session 29 before it was
+run): every clip at 60 Hz on the odd frames from 21 and 51, at 30 Hz from 19 and at 24 Hz from
+71; 85_02 also at 40 Hz from 171 and 471 and at 120 Hz from 561.
 "robust-angles" (session 25) adds angle priors (angle_priors): per joint, the range of the
 angle between its bone and its parent's bone (with a grandparent) and each sibling's bone
 (other children of its parent) over every frame of the other trial's clips (131_01* judged by
@@ -95,6 +97,13 @@ priors' excess kept: a basis chosen to the window's motion (the thesis chooses K
 (dev, seed 0: identical figures). "robust-cap1/4/9/16" (session 28, off by default in the
 library) are robust-kgate with angle_cap = 1, 4, 9, 16: each frame's prior excess counts at
 most that many tolerances² and stops pulling the refinement beyond √cap tolerances.
+"robust-steady" (session 29) is robust-kgate with the BVH clips' rigid points learned with
+learn_angle_ranges(steady=0.08): a point is rigid with the joint and its parent only if the
+angle at the parent also varies by less than 0.08 rad (std) over the other trial's frames.
+The distance test alone admits points far from a short bone (a knee's distances to the head
+or the shoulders vary by a few per cent while the angle at the hip swings by 30-75 deg):
+ranges of the other trial's walking postures, which a window of another activity misses.
+85_02's marker ranges come from the same capture and stay as robust-kgate's.
 Run: python benches/articulated_accuracy.py [--quick | --full] [--parts dev,fresh,...]
 [--methods robust,thesis] [--skeleton] [--static-camera]
 """
@@ -221,8 +230,8 @@ def run(
     x, rng = observed(w, j, noise, missing, seed)
     parent = w.P[:, p] + smooth_offset(F, root * bone(w, j, p), rng)
     priors = []
-    ranges = window_ranges(w)
     kinds = PRIOR_METHODS.get(method, ())
+    ranges = window_ranges(w, kinds)
     if w.clip in C3D_CLIPS and "rigid" not in kinds:
         kinds = ()  # markers: no anatomy, no bend nor sibling prior
     g = dict(w.pairs).get(p)
@@ -346,8 +355,8 @@ def run_skeleton(
         # Angle priors from what is reconstructed already: the grandparent on the chain, and
         # the siblings reconstructed for other chains from the same given root.
         priors = []
-        ranges = window_ranges(w)
         kinds = PRIOR_METHODS.get(method, ())
+        ranges = window_ranges(w, kinds)
         if w.clip in C3D_CLIPS and "rigid" not in kinds:
             kinds = ()
         if "bend" in kinds and i + 2 < len(chain) and (c, chain[i + 2], pc) in ranges:
@@ -402,6 +411,7 @@ METHOD_OPTIONS: dict[str, dict] = {
     "robust-kbic": {"method": "robust", "k_alternatives": (12, 16), "k_per_second": None},
     "robust-kgate": {"method": "robust", "k_alternatives": (12, 16), "k_per_second": 8.0},
 }
+METHOD_OPTIONS["robust-steady"] = dict(METHOD_OPTIONS["robust-kgate"])
 METHOD_OPTIONS.update(
     {f"robust-cap{c:g}": {**METHOD_OPTIONS["robust-kgate"], "angle_cap": float(c)} for c in CAPS}
 )
@@ -423,23 +433,32 @@ PRIOR_METHODS: dict[str, tuple[str, ...]] = {
     "robust-kbic": ("bend", "siblings", "rigid"),
     "robust-kgate": ("bend", "siblings", "rigid"),
     **{f"robust-cap{c:g}": ("bend", "siblings", "rigid") for c in CAPS},
+    "robust-steady": ("bend", "siblings", "rigid", "steady"),
 }
 # learn_angle_ranges(rigid=RIGID): points whose distances to the joint and its parent vary by
 # less than 8 % (std / mean) count as rigid with them.
 RIGID = 0.08
 C3D_CLIPS = ("85_02",)
+# learn_angle_ranges(steady=STEADY) for "steady" (session 29): a rigid point also needs the
+# angle at the parent to vary by less than 0.08 rad (std) over the other trial's frames.
+STEADY = 0.08
 ANGLE_RANGES: dict[str, dict[tuple[int, int, int], tuple[float, float]]] = {}
+STEADY_RANGES: dict[str, dict[tuple[int, int, int], tuple[float, float]]] = {}
 CLIP_POSITIONS: dict[str, np.ndarray] = {}
 _WINDOW_RANGES: dict[tuple[str, int, int], dict[tuple[int, int, int], tuple[float, float]]] = {}
 
 
-def window_ranges(w: Window) -> dict[tuple[int, int, int], tuple[float, float]]:
+def window_ranges(
+    w: Window, kinds: tuple[str, ...] = ()
+) -> dict[tuple[int, int, int], tuple[float, float]]:
     """The angle priors for window ``w``: a BVH clip's learned from the other trial
-    (:func:`angle_ranges`); the marker clip's (rigid points only) learned from its own
-    frames outside the window's span, as a calibration capture of the same marker set would
-    give them (same subject and marker placement, so optimistic like the BVH ranges)."""
+    (:func:`angle_ranges`; with "steady" in ``kinds`` its rigid points also need a steady
+    angle, learn_angle_ranges(steady=STEADY)); the marker clip's (rigid points only) learned
+    from its own frames outside the window's span, as a calibration capture of the same
+    marker set would give them (same subject and marker placement, so optimistic like the
+    BVH ranges; the same capture, so "steady" does not apply)."""
     if w.clip not in C3D_CLIPS:
-        return ANGLE_RANGES.get(w.clip, {})
+        return (STEADY_RANGES if "steady" in kinds else ANGLE_RANGES).get(w.clip, {})
     key = (w.clip, w.step, w.offset)
     if key not in _WINDOW_RANGES:
         P = CLIP_POSITIONS[w.clip]
@@ -456,6 +475,7 @@ def window_ranges(w: Window) -> dict[tuple[int, int, int], tuple[float, float]]:
 
 def angle_ranges(
     clips: dict[str, tuple[np.ndarray, list[tuple[int, int]]]],
+    steady: float | None = None,
 ) -> dict[str, dict[tuple[int, int, int], tuple[float, float]]]:
     """Per BVH clip, the angle priors learned from the other trial's clips."""
     out = {}
@@ -466,7 +486,7 @@ def angle_ranges(
         for c, pc in pairs:
             parents[c] = pc
         others = [Q for n, (Q, _) in clips.items() if n.startswith("131_") and n[:6] != name[:6]]
-        out[name] = sc.learn_angle_ranges(others, parents, rigid=RIGID)
+        out[name] = sc.learn_angle_ranges(others, parents, rigid=RIGID, steady=steady)
     return out
 
 
@@ -499,6 +519,7 @@ PARTS = (
     "final23",
     "final24",
     "final25",
+    "final26",
 )
 # Session 8's never-seen cuts: every clip sampled at 40 Hz (every third frame) from
 # frames 10 and 100, 60 frames each (the other parts sample every second frame).
@@ -557,6 +578,11 @@ FINAL24_C3D_CUTS = ((6, 203), (6, 353), (7, 11), (7, 381))
 # frames 75 and 135 where 60 frames fit; 85_02 also at 24 Hz from frames 133 and 433.
 FINAL25_CUTS = ((3, 5), (3, 59), (2, 75), (2, 135))
 FINAL25_C3D_CUTS = ((5, 133), (5, 433))
+# Session 29's never-seen cuts (defined before they were run, for robust-steady): every clip
+# at 60 Hz on the odd frames from 21 and 51, at 30 Hz from 19 and at 24 Hz from 71 where 60
+# frames fit; 85_02 also at 40 Hz from frames 171 and 471 and at 120 Hz from 561.
+FINAL26_CUTS = ((2, 21), (2, 51), (4, 19), (5, 71))
+FINAL26_C3D_CUTS = ((3, 171), (3, 471), (1, 561))
 
 
 def load_clips() -> dict[str, tuple[np.ndarray, list[tuple[int, int]]]]:
@@ -640,6 +666,8 @@ def all_windows(
     wins += cut("final24", FINAL24_C3D_CUTS, c3d)
     wins += cut("final25", FINAL25_CUTS)
     wins += cut("final25", FINAL25_C3D_CUTS, c3d)
+    wins += cut("final26", FINAL26_CUTS)
+    wins += cut("final26", FINAL26_C3D_CUTS, c3d)
     return wins
 
 
@@ -669,6 +697,7 @@ def main() -> None:
             raise SystemExit(f"--methods: choose among {', '.join(METHOD_OPTIONS)}")
     clips = load_clips()
     ANGLE_RANGES.update(angle_ranges(clips))
+    STEADY_RANGES.update(angle_ranges(clips, steady=STEADY))
     CLIP_POSITIONS.update({name: P for name, (P, _) in clips.items()})
     wins = all_windows(clips, static=args.static_camera)
     wins = [(part, w) for part, w in wins if part in parts]
