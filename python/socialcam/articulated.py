@@ -898,11 +898,10 @@ def _vector_angles(u: FloatArray, v: FloatArray) -> FloatArray:
     return out
 
 
-def _angle_spread(clips: list[Any], p: int, j: int, qs: list[int]) -> FloatArray:
-    """(len(qs),) standard deviation, radians, over every clip's frames, of the angle at
-    ``p`` between the bone ``p → j`` and ``p → q`` for each ``q`` (frames with a gap left
-    out; NaN where fewer than two frames are left)."""
-    X = np.concatenate(clips)
+def _angle_spread(X: FloatArray, p: int, j: int, qs: list[int]) -> FloatArray:
+    """(len(qs),) standard deviation, radians, over the frames of ``X`` (F, J, 3), of the
+    angle at ``p`` between the bone ``p → j`` and ``p → q`` for each ``q`` (frames with a gap
+    left out; NaN where fewer than two frames are left)."""
     u = np.repeat(X[:, j] - X[:, p], len(qs), axis=0)
     v = (X[:, qs] - X[:, p : p + 1]).reshape(-1, 3)
     ang = _vector_angles(u, v).reshape(-1, len(qs))  # (F, n)
@@ -940,6 +939,9 @@ def learn_angle_ranges(
         (standard deviation over mean, over every frame given): the three move as one rigid
         body, so the angle at the parent is nearly constant. Made for optical marker sets,
         whose markers have no anatomy but sit in groups on one segment (e.g. 0.08).
+    quantiles : the range's ends as quantiles of the angle over every frame (the default,
+        min and max).
+    margin : radians added on both sides (≥ 0), the range then clipped to [0, π].
     steady : if given (radians), a ``rigid`` point is kept only if the angle itself at the
         parent, between the bone and the point, varies by less than ``steady`` (standard
         deviation over every frame given). Distances alone let through a point far from a
@@ -948,9 +950,6 @@ def learn_angle_ranges(
         and misses other activities. Give it (e.g. 0.08) when the ranges come from another
         capture than the one reconstructed; leave it out for a calibration capture of the
         same session.
-    quantiles : the range's ends as quantiles of the angle over every frame (the default,
-        min and max).
-    margin : radians added on both sides (≥ 0), the range then clipped to [0, π].
 
     Returns
     -------
@@ -994,6 +993,7 @@ def learn_angle_ranges(
         mean = np.divide(s1, n, out=np.zeros_like(s1), where=seen)
         var = np.divide(s2, n, out=np.zeros_like(s2), where=seen) - mean**2
         spread[seen] = np.sqrt(np.maximum(var[seen], 0.0)) / mean[seen]
+    frames = np.concatenate(clips)  # every clip's frames, for the steady test
     keys: list[tuple[int, int, int]] = []
     for j, p in enumerate(parents_):
         if p == -1:
@@ -1010,7 +1010,7 @@ def learn_angle_ranges(
             if sd_max is not None and qs:
                 qs = [
                     q
-                    for q, sd in zip(qs, _angle_spread(clips, p, j, qs), strict=True)
+                    for q, sd in zip(qs, _angle_spread(frames, p, j, qs), strict=True)
                     if sd < sd_max
                 ]
             keys += [(j, p, q) for q in qs]
