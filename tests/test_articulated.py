@@ -806,6 +806,30 @@ def test_basis_sizes_are_tried_up_to_k_per_second_of_the_window() -> None:
             np.testing.assert_array_equal(gated, size[16] if rate == 20.0 else size[8])
 
 
+def _joint_priors(
+    P: np.ndarray, ranges: dict[tuple[int, int, int], tuple[float, float]], j: int, p: int
+) -> list[tuple[np.ndarray, tuple[float, float]]]:
+    """The true-reference angle priors of joint ``j`` (parent ``p``) among ``ranges``."""
+    return [
+        (P[:, b] - P[:, a], lohi) for (jj, a, b), lohi in ranges.items() if jj == j and p in (a, b)
+    ]
+
+
+def _exact_errors(
+    P: np.ndarray, cams: sc.Cameras, px: np.ndarray, j: int, p: int, priors: list, **opts: Any
+) -> list[float]:
+    """Relative error of joint ``j`` with its exact parent and mean length, 0.5 px noise,
+    seeds 0-2."""
+    r = float(np.linalg.norm(P[:, j] - P[:, p], axis=1).mean())
+    den = float(np.linalg.norm(P[:, j] - P[:, p]))
+    errs = []
+    for seed in range(3):
+        x = px[:, j] + np.random.default_rng(seed * 100 + j).normal(0, 0.5, (P.shape[0], 2))
+        out = sc.reconstruct_articulated(x, cams, P[:, p], r, angle_priors=priors, **opts)
+        errs.append(float(np.linalg.norm(out.points - P[:, j]) / den))
+    return errs
+
+
 def test_angle_cap_frees_a_joint_from_ranges_that_miss_its_window() -> None:
     # CMU 131_01 starting to walk, frames 201-260 at 120 Hz (0.5 s), exact parent and
     # length, 0.5 px noise, every prior learned from the other trial (bend, siblings, rigid
@@ -819,29 +843,11 @@ def test_angle_cap_frees_a_joint_from_ranges_that_miss_its_window() -> None:
     for name in ("RightKnee", "LeftAnkle"):
         j = skeleton.index(name)
         p = skeleton.parents[j]
-        priors = [
-            (P[:, b] - P[:, a], lohi)
-            for (jj, a, b), lohi in ranges.items()
-            if jj == j and p in (a, b)
-        ]
+        priors = _joint_priors(P, ranges, j, p)
         assert len(priors) >= 8
-        r = float(np.linalg.norm(P[:, j] - P[:, p], axis=1).mean())
-        den = float(np.linalg.norm(P[:, j] - P[:, p]))
+        e = {cap: _exact_errors(P, cams, px, j, p, priors, angle_cap=cap) for cap in (None, 9.0)}
         for seed in range(3):
-            x = px[:, j] + np.random.default_rng(seed * 100 + j).normal(0, 0.5, (60, 2))
-            e = {
-                cap: float(
-                    np.linalg.norm(
-                        sc.reconstruct_articulated(
-                            x, cams, P[:, p], r, angle_priors=priors, angle_cap=cap
-                        ).points
-                        - P[:, j]
-                    )
-                    / den
-                )
-                for cap in (None, 9.0)
-            }
-            assert e[None] > 0.4 and e[9.0] < 0.05, (name, seed, e)
+            assert e[None][seed] > 0.4 and e[9.0][seed] < 0.05, (name, seed, e)
 
 
 def test_steady_keeps_only_rigid_points_whose_angle_holds() -> None:
@@ -873,19 +879,10 @@ def test_steady_keeps_only_rigid_points_whose_angle_holds() -> None:
     P, skeleton, keep, cams, px = _clip_window("cmu_131_01_start300.bvh", 201, step=1)
     j = skeleton.index("RightKnee")
     p = skeleton.parents[j]
-    r_ = float(np.linalg.norm(P[:, j] - P[:, p], axis=1).mean())
-    den = float(np.linalg.norm(P[:, j] - P[:, p]))
     for steady, ok in ((None, False), (0.08, True)):
         ranges = _trial_ranges("02", skeleton, keep, rigid=0.08, steady=steady)
-        priors = [
-            (P[:, b] - P[:, a], lohi)
-            for (jj, a, b), lohi in ranges.items()
-            if jj == j and p in (a, b)
-        ]
-        for seed in range(3):
-            x = px[:, j] + np.random.default_rng(seed * 100 + j).normal(0, 0.5, (60, 2))
-            out = sc.reconstruct_articulated(x, cams, P[:, p], r_, angle_priors=priors)
-            e = float(np.linalg.norm(out.points - P[:, j]) / den)
+        errs = _exact_errors(P, cams, px, j, p, _joint_priors(P, ranges, j, p))
+        for seed, e in enumerate(errs):
             assert (e < 0.06) == ok, (steady, seed, e)
 
 

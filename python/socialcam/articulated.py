@@ -993,7 +993,8 @@ def learn_angle_ranges(
         mean = np.divide(s1, n, out=np.zeros_like(s1), where=seen)
         var = np.divide(s2, n, out=np.zeros_like(s2), where=seen) - mean**2
         spread[seen] = np.sqrt(np.maximum(var[seen], 0.0)) / mean[seen]
-    frames = np.concatenate(clips)  # every clip's frames, for the steady test
+    # Every clip's frames, stacked for the steady test only.
+    frames = np.concatenate(clips) if sd_max is not None else np.empty((0, J, 3))
     keys: list[tuple[int, int, int]] = []
     for j, p in enumerate(parents_):
         if p == -1:
