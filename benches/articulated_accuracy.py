@@ -520,6 +520,7 @@ PARTS = (
     "final24",
     "final25",
     "final26",
+    "final27",
 )
 # Session 8's never-seen cuts: every clip sampled at 40 Hz (every third frame) from
 # frames 10 and 100, 60 frames each (the other parts sample every second frame).
@@ -583,6 +584,12 @@ FINAL25_C3D_CUTS = ((5, 133), (5, 433))
 # frames fit; 85_02 also at 40 Hz from frames 171 and 471 and at 120 Hz from 561.
 FINAL26_CUTS = ((2, 21), (2, 51), (4, 19), (5, 71))
 FINAL26_C3D_CUTS = ((3, 171), (3, 471), (1, 561))
+# Session 30's never-seen cuts (defined before they were run; no method change since final26):
+# every clip at 60 Hz on the odd frames from 7 and 97 and at 40 Hz from 20 where 60 frames fit;
+# 85_02 also at 60 Hz from 391, at 30 Hz from 291 and at 15 Hz (every eighth frame, 4 s
+# windows: a rate no other part uses) from 37.
+FINAL27_CUTS = ((2, 7), (2, 97), (3, 20))
+FINAL27_C3D_CUTS = ((2, 391), (4, 291), (8, 37))
 
 
 def load_clips() -> dict[str, tuple[np.ndarray, list[tuple[int, int]]]]:
@@ -668,6 +675,8 @@ def all_windows(
     wins += cut("final25", FINAL25_C3D_CUTS, c3d)
     wins += cut("final26", FINAL26_CUTS)
     wins += cut("final26", FINAL26_C3D_CUTS, c3d)
+    wins += cut("final27", FINAL27_CUTS)
+    wins += cut("final27", FINAL27_C3D_CUTS, c3d)
     return wins
 
 
