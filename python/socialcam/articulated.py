@@ -527,6 +527,23 @@ def reconstruct_articulated(
     DegenerateError
         Fewer observed frames than ``k``.
 
+    Notes
+    -----
+    What one camera per frame cannot tell. Each ray meets the sphere about the parent twice;
+    where the two roots come close (the ray nearly grazes the sphere), the arc between them
+    leaves the ray by only ``sep² / 8r`` (``sep`` the roots' distance, ``r`` the bone), a
+    pixel or two at the joint's depth. A trajectory can pass to the other root there and come
+    back at the next such frame for about the noise's worth of reprojection error, so the
+    piece between may lie on either side. The smoothness score, the angle priors and the
+    children then decide, and they are sometimes wrong: on the CMU windows of
+    ``benches/articulated_accuracy.py`` at exact length and root, such pieces make a third to
+    two thirds of the joints whose error is above a tenth of the bone (a slow arm in a
+    standing clip goes to the other side by 6–10 cm). Where the joint is seen from a second
+    camera at the same time, that view decides. Likewise, a window without grazing frames
+    does not fix the bone length (any length above the rays' distances from the parent puts
+    a point on every ray): the refinement within ``length_tol`` then follows the noise, and
+    a length known exactly is better held (``length_tol=0``).
+
     Examples
     --------
     A right hip from the hips (``parent``) with the left hip given too (the pelvis keeps the
