@@ -541,8 +541,9 @@ def reconstruct_articulated(
     standing clip goes to the other side by 6–10 cm). Where the joint is seen from a second
     camera at the same time, that view decides. Likewise, a window without grazing frames
     does not fix the bone length (any length above the rays' distances from the parent puts
-    a point on every ray): the refinement within ``length_tol`` then follows the noise, and
-    a length known exactly is better held (``length_tol=0``).
+    a point on every ray): the refinement within ``length_tol`` then follows the noise. A
+    length known exactly can be held (``length_tol=0``): on the same windows the median
+    error falls about tenfold, the other-side pieces stay.
 
     Examples
     --------
