@@ -543,7 +543,7 @@ def reconstruct_articulated(
     does not fix the bone length (any length above the rays' distances from the parent puts
     a point on every ray): the refinement within ``length_tol`` then follows the noise. A
     length known exactly can be held (``length_tol=0``): on the same windows the median
-    error falls about tenfold, the other-side pieces stay.
+    error falls 1.2–3.7-fold, the other-side pieces stay.
 
     Examples
     --------
