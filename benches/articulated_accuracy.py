@@ -59,7 +59,9 @@ and at 17.1 Hz (every seventh frame) from 11 and 381. Final25 (defined in sessio
 was run, after final24's first run): every clip at 40 Hz from frames 5 and 59 and at 60 Hz from
 75 and 135; 85_02 also at 24 Hz from 133 and 433. Final26 (defined in session 29 before it was
 run): every clip at 60 Hz on the odd frames from 21 and 51, at 30 Hz from 19 and at 24 Hz from
-71; 85_02 also at 40 Hz from 171 and 471 and at 120 Hz from 561.
+71; 85_02 also at 40 Hz from 171 and 471 and at 120 Hz from 561. Final27 (defined in session 30
+before it was run): every clip at 60 Hz on the odd frames from 7 and 97 and at 40 Hz from 20;
+85_02 also at 60 Hz from 391, at 30 Hz from 291 and at 15 Hz from 37.
 "robust-angles" (session 25) adds angle priors (angle_priors): per joint, the range of the
 angle between its bone and its parent's bone (with a grandparent) and each sibling's bone
 (other children of its parent) over every frame of the other trial's clips (131_01* judged by
