@@ -62,6 +62,9 @@ run): every clip at 60 Hz on the odd frames from 21 and 51, at 30 Hz from 19 and
 71; 85_02 also at 40 Hz from 171 and 471 and at 120 Hz from 561. Final27 (defined in session 30
 before it was run): every clip at 60 Hz on the odd frames from 7 and 97 and at 40 Hz from 20;
 85_02 also at 60 Hz from 391, at 30 Hz from 291 and at 15 Hz from 37.
+"hop" (defined in session 31 before it was run) is a clip none of the others is: subject 131's third
+trial, "start, hop, stop" (two 300-frame cuts of the hopping), at 60, 40 and 30 Hz, with angle
+ranges learned on both walking trials.
 "robust-angles" (session 25) adds angle priors (angle_priors): per joint, the range of the
 angle between its bone and its parent's bone (with a grandparent) and each sibling's bone
 (other children of its parent) over every frame of the other trial's clips (131_01* judged by
@@ -487,7 +490,12 @@ def angle_ranges(
         parents = [-1] * P.shape[1]
         for c, pc in pairs:
             parents[c] = pc
-        others = [Q for n, (Q, _) in clips.items() if n.startswith("131_") and n[:6] != name[:6]]
+        # the hop trial (131_03) is judged by both walking trials and judges neither
+        others = [
+            Q
+            for n, (Q, _) in clips.items()
+            if n.startswith("131_") and n[:6] != name[:6] and not n.startswith(HOP_TRIAL)
+        ]
         out[name] = sc.learn_angle_ranges(others, parents, rigid=RIGID, steady=steady)
     return out
 
@@ -523,6 +531,7 @@ PARTS = (
     "final25",
     "final26",
     "final27",
+    "hop",
 )
 # Session 8's never-seen cuts: every clip sampled at 40 Hz (every third frame) from
 # frames 10 and 100, 60 frames each (the other parts sample every second frame).
@@ -592,6 +601,14 @@ FINAL26_C3D_CUTS = ((3, 171), (3, 471), (1, 561))
 # windows: a rate no other part uses) from 37.
 FINAL27_CUTS = ((2, 7), (2, 97), (3, 20))
 FINAL27_C3D_CUTS = ((2, 391), (4, 291), (8, 37))
+# Session 31's never-seen clip (defined before it was run; no method change since final26): a
+# third trial of subject 131, "start, hop, stop" (131_03), a motion no other clip has, in two
+# cuts of 300 frames (131_03h from source frame 250, 131_03i from 550). Windows at 60 Hz from
+# frames 0, 30, 60, 90 and 120, at 40 Hz from 10 and 100 and at 30 Hz from 5; its angle
+# ranges are learned on both walking trials (131_01 and 131_02), which stay judged by each
+# other only, so every other part is unchanged.
+HOP_TRIAL = "131_03"
+HOP_CUTS = ((2, 0), (2, 30), (2, 60), (2, 90), (2, 120), (3, 10), (3, 100), (4, 5))
 
 
 def load_clips() -> dict[str, tuple[np.ndarray, list[tuple[int, int]]]]:
@@ -606,6 +623,8 @@ def load_clips() -> dict[str, tuple[np.ndarray, list[tuple[int, int]]]]:
         "131_02s": bvh_clip("cmu_131_02_start300.bvh"),
         "131_01a": bvh_clip("cmu_131_01_stand150.bvh"),
         "131_02a": bvh_clip("cmu_131_02_stand200.bvh"),
+        "131_03h": bvh_clip("cmu_131_03_hop300a.bvh"),
+        "131_03i": bvh_clip("cmu_131_03_hop300b.bvh"),
     }
 
 
@@ -621,8 +640,11 @@ def all_windows(
     fresh_clips = ("131_01t", "131_02s")
     unseen_clips = ("131_01a", "131_02a")
     dev_clips = ("131_01", "85_02")
+    hop = tuple(n for n in clips if n.startswith(HOP_TRIAL))
+    base = tuple(n for n in clips if n not in hop)
     wins: list[tuple[str, Window]] = []
-    for name, (P, pairs) in clips.items():
+    for name in base:
+        P, pairs = clips[name]
         for off in (0, 30, 60, 90, 120):
             if P[off::2].shape[0] < 60:
                 continue
@@ -639,7 +661,7 @@ def all_windows(
             )
             wins.append((part, win(name, P, pairs, 2, off)))
 
-    def cut(part: str, steps_offsets, names=tuple(clips)) -> list[tuple[str, Window]]:
+    def cut(part: str, steps_offsets, names=base) -> list[tuple[str, Window]]:
         """Windows of ``part`` for every clip of ``names`` at each ``(step, offset)`` where
         60 frames fit, clip by clip."""
         return [
@@ -679,6 +701,7 @@ def all_windows(
     wins += cut("final26", FINAL26_C3D_CUTS, c3d)
     wins += cut("final27", FINAL27_CUTS)
     wins += cut("final27", FINAL27_C3D_CUTS, c3d)
+    wins += cut("hop", HOP_CUTS, hop)
     return wins
 
 
