@@ -258,7 +258,8 @@ def reconstruct_articulated(
     joint's bone as ``(reference bones (F,3), lo, hi)``, radians. A dict with ``X (F,3)``,
     ``radius``, ``bqp_radius``, ``coeffs_theta``/``coeffs_phi (K,)``, ``bqp_size``,
     ``bqp_objective``, ``bqp_gap``, ``bqp_nodes``, ``bqp_optimal``, ``n_observed``,
-    ``reprojection_rms``, ``lm_iterations``, ``converged``."""
+    ``reprojection_rms``, ``lm_iterations``, ``converged``, ``selection_margin``,
+    ``alternative`` ``(F,3)`` or ``None``."""
 
 def reconstruct_skeleton(
     k_mat: _F64,

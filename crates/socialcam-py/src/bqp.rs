@@ -290,6 +290,19 @@ fn result_dict<'py>(
     d.set_item("reprojection_rms", r.reprojection_rms)?;
     d.set_item("lm_iterations", r.lm_iterations)?;
     d.set_item("converged", r.converged)?;
+    d.set_item("selection_margin", r.selection_margin)?;
+    match r.alternative {
+        Some(alt) => {
+            let mut a = Array2::<f64>::zeros((alt.len(), 3));
+            for (i, p) in alt.iter().enumerate() {
+                for j in 0..3 {
+                    a[[i, j]] = p[j];
+                }
+            }
+            d.set_item("alternative", a.into_pyarray(py))?;
+        }
+        None => d.set_item("alternative", py.None())?,
+    }
     Ok(d)
 }
 

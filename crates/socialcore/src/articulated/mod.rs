@@ -437,6 +437,15 @@ pub struct ArticulatedResult {
     /// LM iterations and whether its tolerance was met (true when not refined).
     pub lm_iterations: usize,
     pub converged: bool,
+    /// How clearly the selection preferred the result (robust method): the selection
+    /// score of the best start lying in another basin ([`OTHER_BASIN`]) minus the
+    /// selected start's (≥ 0; in the score's units, where a reprojection cost one standard
+    /// deviation higher counts 1). `+∞` when no start lies in another basin (and for the
+    /// thesis method, which has one start).
+    pub selection_margin: f64,
+    /// That start's trajectory (at the selection's basis size `k`, before any growth),
+    /// world metres, every frame; `None` when there is none.
+    pub alternative: Option<Vec<Vector3<f64>>>,
 }
 
 /// The candidate geometry of one joint: both intersections per observed frame.
@@ -1006,6 +1015,40 @@ pub(crate) fn start_scores_at(
 /// [`ArticulatedOptions::average_starts`].
 pub const AVERAGE_SHARPNESS: f64 = 2.0;
 
+/// A start whose trajectory lies farther than this fraction of the bone length (RMS over
+/// the frames) from the selected start's is another solution: mostly the other root of the
+/// rays over part of the window. The best-scoring of them is the result's
+/// [`ArticulatedResult::alternative`], its score gap the
+/// [`ArticulatedResult::selection_margin`].
+pub const OTHER_BASIN: f64 = 0.1;
+
+/// The best start in another basin than `pick` ([`OTHER_BASIN`] × `bone`, RMS over the
+/// frames) and its score above `pick`'s: `(margin, index)`, or `(+∞, None)`.
+pub(crate) fn other_basin(
+    points: &[Vec<Vector3<f64>>],
+    scores: &[f64],
+    pick: usize,
+    bone: f64,
+) -> (f64, Option<usize>) {
+    let mut best: (f64, Option<usize>) = (f64::INFINITY, None);
+    for (i, p) in points.iter().enumerate() {
+        if i == pick || !scores[i].is_finite() {
+            continue;
+        }
+        let ms = p
+            .iter()
+            .zip(&points[pick])
+            .map(|(a, b)| (a - b).norm_squared())
+            .sum::<f64>()
+            / p.len().max(1) as f64;
+        let gap = scores[i] - scores[pick];
+        if ms.sqrt() > OTHER_BASIN * bone && gap < best.0 {
+            best = (gap, Some(i));
+        }
+    }
+    best
+}
+
 /// Starts whose trajectories lie within this fraction of the bone length (RMS over the
 /// frames) of a better-scoring start are the same solution found again (the searches over
 /// grazing passes converge to the same basin many times) and count once in the average of
@@ -1409,9 +1452,32 @@ pub fn reconstruct_articulated_prior(
             .map(|i| fit.point(i, &s.2 .0, &s.2 .1, s.2 .2))
             .collect()
     };
-    // Every start's trajectory at `k`, for the average.
-    let all: Option<Vec<Vec<Vector3<f64>>>> =
-        (robust && opts.average_starts).then(|| starts.iter().map(start_points).collect());
+    // Every start's trajectory at `k`: the other basin's best start, and the average.
+    let all: Vec<Vec<Vector3<f64>>> = starts.iter().map(start_points).collect();
+    // The selection's scores (the lowest cost kept when the weights are zero: then in
+    // standard deviations of the cost).
+    let margin_scores: Vec<f64> = start_scores(&scores, obs.len(), opts.k, weights)
+        .or_else(|| {
+            let cmin = scores
+                .iter()
+                .map(|e| e.cost + e.children)
+                .min_by(f64::total_cmp)?;
+            let sd = cost_sd(cmin, obs.len(), opts.k);
+            Some(
+                scores
+                    .iter()
+                    .map(|e| (e.cost + e.children - cmin) / sd)
+                    .collect(),
+            )
+        })
+        .unwrap_or_default();
+    let (selection_margin, alt) = if margin_scores.len() == all.len() {
+        other_basin(&all, &margin_scores, pick, r_thesis)
+    } else {
+        (f64::INFINITY, None)
+    };
+    let alternative = alt.map(|i| all[i].clone());
+    let all = (robust && opts.average_starts).then_some(all);
     let (_, frame, (at, ap, radius, lm_iterations, converged), bqp, bqp_size, bqp_radius) =
         starts.swap_remove(pick);
     let c = scores[pick].cost;
@@ -1477,6 +1543,8 @@ pub fn reconstruct_articulated_prior(
         reprojection_rms,
         lm_iterations,
         converged,
+        selection_margin: selection_margin.max(0.0),
+        alternative,
     })
 }
 

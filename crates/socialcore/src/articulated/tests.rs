@@ -581,6 +581,63 @@ fn starts_are_averaged_by_the_exponential_of_their_score() {
 }
 
 #[test]
+fn the_best_start_of_another_basin_gives_the_margin() {
+    // Bone 0.5 m: another basin lies farther than 0.05 m (RMS) from the selected start.
+    let traj = |x: f64| vec![Vector3::new(x, 0.0, 0.0); 4];
+    let pts = [traj(0.0), traj(0.02), traj(0.3), traj(0.2), traj(0.4)];
+    // Start 1 is the same basin (2 cm), however close its score; start 3 beats start 2 and
+    // start 4 does not count (not a number).
+    let scores = [-1.0, -0.99, 0.5, -0.7, f64::NAN];
+    let (margin, alt) = other_basin(&pts, &scores, 0, 0.5);
+    assert_eq!(alt, Some(3));
+    assert!((margin - 0.3).abs() < 1e-12, "{margin}");
+    // Nothing farther than a tenth of the bone: no alternative.
+    let (margin, alt) = other_basin(&pts[..2], &scores[..2], 0, 0.5);
+    assert!(margin.is_infinite() && alt.is_none());
+    // A longer bone makes the same starts one basin.
+    let (_, alt) = other_basin(&pts[..4], &scores[..4], 0, 4.0);
+    assert!(alt.is_none());
+}
+
+#[test]
+fn the_result_reports_its_margin() {
+    let s = scene(40, 0.4, 0.5, 3);
+    let robust = reconstruct_articulated(
+        &s.cameras,
+        &s.pixels,
+        &s.parent,
+        &s.times,
+        s.length,
+        &ArticulatedOptions::default(),
+    )
+    .expect("robust");
+    assert!(
+        robust.selection_margin >= 0.0,
+        "{}",
+        robust.selection_margin
+    );
+    if let Some(alt) = &robust.alternative {
+        assert_eq!(alt.len(), 40);
+        assert!(robust.selection_margin.is_finite());
+    } else {
+        assert!(robust.selection_margin.is_infinite());
+    }
+    let thesis = reconstruct_articulated(
+        &s.cameras,
+        &s.pixels,
+        &s.parent,
+        &s.times,
+        s.length,
+        &ArticulatedOptions {
+            method: ArticulatedMethod::Thesis,
+            ..Default::default()
+        },
+    )
+    .expect("thesis");
+    assert!(thesis.selection_margin.is_infinite() && thesis.alternative.is_none());
+}
+
+#[test]
 fn of_starts_alike_the_shorter_bone_wins() {
     // σ(cost) ≈ 12.9 px² (50 observations, k = 8). Two starts alike in roughness and motion;
     // the second fits 6 px² (about half a σ) worse with a 5 % shorter bone: with the
