@@ -266,14 +266,7 @@ fn result_dict<'py>(
     r: ArticulatedResult,
 ) -> PyResult<Bound<'py, pyo3::types::PyDict>> {
     let d = pyo3::types::PyDict::new(py);
-    let f = r.points.len();
-    let mut pts = Array2::<f64>::zeros((f, 3));
-    for (i, p) in r.points.iter().enumerate() {
-        for j in 0..3 {
-            pts[[i, j]] = p[j];
-        }
-    }
-    d.set_item("X", pts.into_pyarray(py))?;
+    d.set_item("X", points_array(&r.points).into_pyarray(py))?;
     d.set_item("radius", r.radius)?;
     d.set_item("bqp_radius", r.bqp_radius)?;
     d.set_item(
@@ -292,18 +285,15 @@ fn result_dict<'py>(
     d.set_item("converged", r.converged)?;
     d.set_item("selection_margin", r.selection_margin)?;
     match r.alternative {
-        Some(alt) => {
-            let mut a = Array2::<f64>::zeros((alt.len(), 3));
-            for (i, p) in alt.iter().enumerate() {
-                for j in 0..3 {
-                    a[[i, j]] = p[j];
-                }
-            }
-            d.set_item("alternative", a.into_pyarray(py))?;
-        }
+        Some(alt) => d.set_item("alternative", points_array(&alt).into_pyarray(py))?,
         None => d.set_item("alternative", py.None())?,
     }
     Ok(d)
+}
+
+/// `(F, 3)` rows of points.
+fn points_array(points: &[nalgebra::Vector3<f64>]) -> Array2<f64> {
+    Array2::from_shape_fn((points.len(), 3), |(i, j)| points[i][j])
 }
 
 /// One articulated trajectory (Eq 4.5–4.12); returns a dict (see `_core.pyi`).
