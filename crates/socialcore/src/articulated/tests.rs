@@ -602,15 +602,10 @@ fn the_best_start_of_another_basin_gives_the_margin() {
 #[test]
 fn the_result_reports_its_margin() {
     let s = scene(40, 0.4, 0.5, 3);
-    let robust = reconstruct_articulated(
-        &s.cameras,
-        &s.pixels,
-        &s.parent,
-        &s.times,
-        s.length,
-        &ArticulatedOptions::default(),
-    )
-    .expect("robust");
+    let run = |o: &ArticulatedOptions| {
+        reconstruct_articulated(&s.cameras, &s.pixels, &s.parent, &s.times, s.length, o)
+    };
+    let robust = run(&ArticulatedOptions::default()).expect("robust");
     assert!(
         robust.selection_margin >= 0.0,
         "{}",
@@ -622,17 +617,10 @@ fn the_result_reports_its_margin() {
     } else {
         assert!(robust.selection_margin.is_infinite());
     }
-    let thesis = reconstruct_articulated(
-        &s.cameras,
-        &s.pixels,
-        &s.parent,
-        &s.times,
-        s.length,
-        &ArticulatedOptions {
-            method: ArticulatedMethod::Thesis,
-            ..Default::default()
-        },
-    )
+    let thesis = run(&ArticulatedOptions {
+        method: ArticulatedMethod::Thesis,
+        ..Default::default()
+    })
     .expect("thesis");
     assert!(thesis.selection_margin.is_infinite() && thesis.alternative.is_none());
 }
