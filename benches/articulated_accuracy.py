@@ -532,6 +532,7 @@ PARTS = (
     "final26",
     "final27",
     "hop",
+    "final28",
 )
 # Session 8's never-seen cuts: every clip sampled at 40 Hz (every third frame) from
 # frames 10 and 100, 60 frames each (the other parts sample every second frame).
@@ -609,6 +610,13 @@ FINAL27_C3D_CUTS = ((2, 391), (4, 291), (8, 37))
 # other only, so every other part is unchanged.
 HOP_TRIAL = "131_03"
 HOP_CUTS = ((2, 0), (2, 30), (2, 60), (2, 90), (2, 120), (3, 10), (3, 100), (4, 5))
+# Session 32's never-seen cuts (defined before they were run; no method change since final26):
+# every clip but the hop cuts at 60 Hz on the odd frames from 43 and 113 and at 30 Hz from 39
+# where 60 frames fit; 85_02 also at 40 Hz from 117 and 417 and at 120 Hz from 707; both hop
+# cuts at 60 Hz from 45 and 165 and at 40 Hz from 55 (start frames no other part uses).
+FINAL28_CUTS = ((2, 43), (2, 113), (4, 39))
+FINAL28_C3D_CUTS = ((3, 117), (3, 417), (1, 707))
+FINAL28_HOP_CUTS = ((2, 45), (2, 165), (3, 55))
 
 
 def load_clips() -> dict[str, tuple[np.ndarray, list[tuple[int, int]]]]:
@@ -702,6 +710,9 @@ def all_windows(
     wins += cut("final27", FINAL27_CUTS)
     wins += cut("final27", FINAL27_C3D_CUTS, c3d)
     wins += cut("hop", HOP_CUTS, hop)
+    wins += cut("final28", FINAL28_CUTS)
+    wins += cut("final28", FINAL28_C3D_CUTS, c3d)
+    wins += cut("final28", FINAL28_HOP_CUTS, hop)
     return wins
 
 
