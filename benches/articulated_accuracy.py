@@ -64,7 +64,10 @@ before it was run): every clip at 60 Hz on the odd frames from 7 and 97 and at 4
 85_02 also at 60 Hz from 391, at 30 Hz from 291 and at 15 Hz from 37.
 "hop" (defined in session 31 before it was run) is a clip none of the others is: subject 131's third
 trial, "start, hop, stop" (two 300-frame cuts of the hopping), at 60, 40 and 30 Hz, with angle
-ranges learned on both walking trials.
+ranges learned on both walking trials. Final28 (defined in session 32 before it was run): every
+clip but the hop cuts at 60 Hz on the odd frames from 43 and 113 and at 30 Hz from 39; 85_02
+also at 40 Hz from 117 and 417 and at 120 Hz from 707; both hop cuts at 60 Hz from 45 and 165
+and at 40 Hz from 55.
 "robust-angles" (session 25) adds angle priors (angle_priors): per joint, the range of the
 angle between its bone and its parent's bone (with a grandparent) and each sibling's bone
 (other children of its parent) over every frame of the other trial's clips (131_01* judged by
