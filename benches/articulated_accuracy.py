@@ -69,7 +69,11 @@ clip but the hop cuts at 60 Hz on the odd frames from 43 and 113 and at 30 Hz fr
 also at 40 Hz from 117 and 417 and at 120 Hz from 707; both hop cuts at 60 Hz from 45 and 165
 and at 40 Hz from 55. "jacks" (defined in session 32 before it was run) is another person: a
 CMU clip of jumping jacks by subject 14 (same skeleton, longer bones), at 30 and 15 Hz, with
-angle ranges learned on both of subject 131's walking trials.
+angle ranges learned on both of subject 131's walking trials. "fair" (defined in session 32
+before it was run) is another capture system and two more people: FAIR's BVH files (shipped
+with AnimatedDrawings; 26 joints, z up, unit set by FAIR_METRES_PER_UNIT), a jump by one actor
+and a wave by another, windows as the hop part's, angle ranges learned on the first actor's
+dab and zombie clips.
 "robust-angles" (session 25) adds angle priors (angle_priors): per joint, the range of the
 angle between its bone and its parent's bone (with a grandparent) and each sibling's bone
 (other children of its parent) over every frame of the other trial's clips (131_01* judged by
@@ -136,7 +140,7 @@ MOCAP = ROOT / "tests" / "data" / "mocap"
 # Every clip of the bench is captured at 120 Hz; a window every `step` frames is at 120 / step Hz.
 SOURCE_HZ = 120.0
 # Clips recorded at another rate than SOURCE_HZ (frames per second).
-CLIP_HZ = {"jacks": 30.0}
+CLIP_HZ = {"jacks": 30.0, "fair_jump": 1 / 0.008342, "fair_wave": 1 / 0.008342}
 K_DCT = 8
 
 
@@ -157,6 +161,17 @@ def bvh_clip(name: str) -> tuple[np.ndarray, list[tuple[int, int]]]:
     sk, keep = sc.Skeleton.from_bvh(m)
     pairs = [(j, sk.parents[j]) for j in range(len(sk.names)) if sk.parents[j] != -1]
     return m.positions[:, keep], pairs
+
+
+def fair_clip(name: str) -> tuple[np.ndarray, list[tuple[int, int]]]:
+    """A FAIR clip (AnimatedDrawings' ``fair1`` BVH files): z up and a unit the files do not
+    state; FAIR_METRES_PER_UNIT makes the actor 1.64 m tall with 0.43 m thighs, and the
+    positions are turned to y up like the CMU clips."""
+    m = load_bvh(MOCAP / name, scale=FAIR_METRES_PER_UNIT)
+    sk, keep = sc.Skeleton.from_bvh(m)
+    pairs = [(j, sk.parents[j]) for j in range(len(sk.names)) if sk.parents[j] != -1]
+    P = m.positions[:, keep]
+    return np.stack([P[..., 0], P[..., 2], -P[..., 1]], axis=-1), pairs
 
 
 def c3d_clip(name: str) -> tuple[np.ndarray, list[tuple[int, int]]]:
@@ -499,6 +514,10 @@ def angle_ranges(
         parents = [-1] * P.shape[1]
         for c, pc in pairs:
             parents[c] = pc
+        if name in FAIR_CLIPS:
+            fair = [fair_clip(f)[0] for f in FAIR_RANGE_CLIPS]
+            out[name] = sc.learn_angle_ranges(fair, parents, rigid=RIGID, steady=steady)
+            continue
         # the hop trial (131_03) and the other subject's clip are judged by both walking
         # trials and judge neither
         others = [
@@ -544,6 +563,7 @@ PARTS = (
     "hop",
     "final28",
     "jacks",
+    "fair",
 )
 # Session 8's never-seen cuts: every clip sampled at 40 Hz (every third frame) from
 # frames 10 and 100, 60 frames each (the other parts sample every second frame).
@@ -633,8 +653,20 @@ FINAL28_HOP_CUTS = ((2, 45), (2, 165), (3, 55))
 # 30-joint skeleton, longer bones), 125 frames at 30 Hz as shipped. Windows at 30 Hz from frames
 # 0, 30 and 65 and at 15 Hz from 0 and 3; its angle ranges are learned on both walking trials of
 # subject 131 (another person, and no arm above the shoulders), which it does not judge.
-OTHER_SUBJECT = ("jacks",)
 JACKS_CUTS = ((1, 0), (1, 30), (1, 65), (2, 0), (2, 3))
+# Session 32's never-seen capture (defined before it was run; no method change since final26):
+# two people of another motion-capture system, FAIR's (AnimatedDrawings' fair1 BVH files, 26
+# joints, its own skeleton): a jump by one actor ("fair_jump", frames 150-449 of 654 at 119.9 Hz)
+# and a wave by another ("fair_wave", a different skeleton's lengths; frames 250-549 of 839).
+# Windows as the hop part's: 60 Hz from frames 0, 30, 60, 90 and 120, 40 Hz from 10 and 100,
+# 30 Hz from 5. Angle ranges learned on two other clips of the first actor (dab, zombie), which
+# are not reconstructed: the jump is judged by its own actor's other motions, the wave by
+# another person's.
+FAIR_METRES_PER_UNIT = 0.04
+FAIR_CUTS = ((2, 0), (2, 30), (2, 60), (2, 90), (2, 120), (3, 10), (3, 100), (4, 5))
+FAIR_CLIPS = ("fair_jump", "fair_wave")
+FAIR_RANGE_CLIPS = ("fair_dab339.bvh", "fair_zombie400.bvh")
+OTHER_SUBJECT = ("jacks", *FAIR_CLIPS)
 
 
 def load_clips() -> dict[str, tuple[np.ndarray, list[tuple[int, int]]]]:
@@ -652,6 +684,8 @@ def load_clips() -> dict[str, tuple[np.ndarray, list[tuple[int, int]]]]:
         "131_03h": bvh_clip("cmu_131_03_hop300a.bvh"),
         "131_03i": bvh_clip("cmu_131_03_hop300b.bvh"),
         "jacks": bvh_clip("cmu_14_jumping_jacks30.bvh"),
+        "fair_jump": fair_clip("fair_jumping300.bvh"),
+        "fair_wave": fair_clip("fair_wave300.bvh"),
     }
 
 
@@ -732,7 +766,8 @@ def all_windows(
     wins += cut("final28", FINAL28_CUTS)
     wins += cut("final28", FINAL28_C3D_CUTS, c3d)
     wins += cut("final28", FINAL28_HOP_CUTS, hop)
-    wins += cut("jacks", JACKS_CUTS, tuple(n for n in clips if n in OTHER_SUBJECT))
+    wins += cut("jacks", JACKS_CUTS, tuple(n for n in clips if n == "jacks"))
+    wins += cut("fair", FAIR_CUTS, tuple(n for n in clips if n in FAIR_CLIPS))
     return wins
 
 
