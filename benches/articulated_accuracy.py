@@ -137,9 +137,9 @@ from socialcam.synth.cameras import look_at
 
 ROOT = Path(__file__).resolve().parent.parent
 MOCAP = ROOT / "tests" / "data" / "mocap"
-# Every clip of the bench is captured at 120 Hz; a window every `step` frames is at 120 / step Hz.
+# The clips are captured at 120 Hz unless CLIP_HZ gives their rate (frames per second); a window
+# every `step` frames is at rate / step Hz.
 SOURCE_HZ = 120.0
-# Clips recorded at another rate than SOURCE_HZ (frames per second).
 CLIP_HZ = {"jacks": 30.0, "fair_jump": 1 / 0.008342, "fair_wave": 1 / 0.008342}
 K_DCT = 8
 
@@ -506,7 +506,9 @@ def angle_ranges(
     clips: dict[str, tuple[np.ndarray, list[tuple[int, int]]]],
     steady: float | None = None,
 ) -> dict[str, dict[tuple[int, int, int], tuple[float, float]]]:
-    """Per BVH clip, the angle priors learned from the other trial's clips."""
+    """Per BVH clip, the angle priors learned from the other trial's clips (subject 131's hop
+    trial and the CMU subject 14 clip: from both walking trials; the FAIR clips: from the first
+    FAIR actor's FAIR_RANGE_CLIPS)."""
     out = {}
     for name, (P, pairs) in clips.items():
         if not name.startswith("131_") and name not in OTHER_SUBJECT:
