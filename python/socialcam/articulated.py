@@ -994,7 +994,10 @@ def learn_angle_ranges(
         thigh swings): a range that holds for the poses of the capture it was learned from
         and misses other activities. Give it (e.g. 0.08) when the ranges come from another
         capture than the one reconstructed; leave it out for a calibration capture of the
-        same session.
+        same session. A steady relation still belongs to one body: learned on one person's
+        walking, the angle between the two hips missed another person's (the bench's CMU
+        subject 14) by 9° in every frame; see ``ArticulatedOptions.angle_refine`` for what
+        such a miss costs.
 
     Returns
     -------
