@@ -2,7 +2,8 @@
 (issue 11 step 5) against the motion capture: median joint error over seeds, with and
 without swap repair, and the share of photos where the photographed person's detection was
 chosen; then harder settings (more swaps, more pixel noise, fewer photos, a second person in
-most photos), and a never-seen person (NEVER_SEEN). The 2D joints are simulated (``socialcam.synth.photos``), no pose model runs.
+most photos), and a never-seen person (NEVER_SEEN). The 2D joints are simulated
+(``socialcam.synth.photos``), no pose model runs.
 
 Run: python benches/bodies_accuracy.py [n_seeds]
 """
