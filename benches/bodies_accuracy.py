@@ -2,8 +2,8 @@
 (issue 11 step 5) against the motion capture: median joint error over seeds, with and
 without swap repair, and the share of photos where the photographed person's detection was
 chosen; then harder settings (more swaps, more pixel noise, fewer photos, a second person in
-most photos), and a never-seen person (NEVER_SEEN). The 2D joints are simulated
-(``socialcam.synth.photos``), no pose model runs.
+most photos), a never-seen person (NEVER_SEEN) and capture system (FAIR_CLIPS). The 2D joints
+are simulated (``socialcam.synth.photos``), no pose model runs.
 
 Run: python benches/bodies_accuracy.py [n_seeds]
 """
@@ -17,7 +17,7 @@ import numpy as np
 
 from socialcam.bodies import reconstruct_body
 from socialcam.mocap import load_bvh
-from socialcam.synth.photos import BODY_PAIRS, photo_collection
+from socialcam.synth.photos import BODY_JOINTS, BODY_PAIRS, photo_collection
 
 DATA = Path(__file__).resolve().parents[1] / "tests" / "data" / "mocap"
 CLIPS = (
@@ -31,6 +31,29 @@ CLIPS = (
 # 14's jumping jacks (125 frames at 30 Hz, arms above the head, longer bones than subject 131's),
 # the second person in some photos from subject 131's walking.
 NEVER_SEEN = (("14_jumping_jacks30", "131_01_walk300"),)
+# Session 32's never-seen capture system (defined before it was run, after k_max 12 -> 24): two
+# FAIR actors (AnimatedDrawings' fair1 BVH files: z up, 0.04 m per unit assumed as in
+# benches/articulated_accuracy.py), a jump and a wave of 2.5 s at 119.9 Hz, each the other's
+# second person. FAIR's joints named as the pose model's: its arm, forearm and hand are the
+# shoulder, elbow and wrist; its up-leg, leg and foot the hip, knee and ankle.
+FAIR_CLIPS = (("fair_jumping300", "fair_wave300"), ("fair_wave300", "fair_jumping300"))
+FAIR_NAMES = {"Shoulder": "Arm", "Elbow": "ForeArm", "Wrist": "Hand", "Hip": "UpLeg",
+              "Knee": "Leg", "Ankle": "Foot"}  # fmt: skip
+FAIR_METRES_PER_UNIT = 0.04
+
+
+class _Clip:
+    """A FAIR clip as the photo simulator takes a BVH motion: y up, metres, BODY_JOINTS."""
+
+    def __init__(self, name: str) -> None:
+        m = load_bvh(DATA / f"{name}.bvh", scale=FAIR_METRES_PER_UNIT)
+        idx = []
+        for joint in BODY_JOINTS:
+            side = next((s for s in ("Left", "Right") if joint.startswith(s)), "")
+            idx.append(m.names.index(side + FAIR_NAMES.get(joint[len(side) :], joint[len(side) :])))
+        P = m.positions[:, idx]
+        self.positions = np.stack([P[..., 0], P[..., 2], -P[..., 1]], axis=-1)
+        self.names, self.fps = list(BODY_JOINTS), m.fps
 
 
 def run(subject, other, seed: int, repair: bool = True, **kw) -> tuple[float, float]:
@@ -56,6 +79,12 @@ def main(argv: list[str]) -> None:
               f"without swap repair {spread(raw)}; right detection chosen >= {min(r[1] for r in rep):.3f}")  # fmt: skip
     for s, o in NEVER_SEEN:
         a, b = load_bvh(DATA / f"cmu_{s}.bvh"), load_bvh(DATA / f"cmu_{o}.bvh")
+        rep = [run(a, b, k) for k in range(n)]
+        raw = [run(a, b, k, repair=False)[0] for k in range(n)]
+        print(f"never-seen {s} (second person {o}), seeds 0-{n - 1}: joint error mm {spread([r[0] for r in rep])}; "
+              f"without swap repair {spread(raw)}; right detection chosen >= {min(r[1] for r in rep):.3f}")  # fmt: skip
+    for s, o in FAIR_CLIPS:
+        a, b = _Clip(s), _Clip(o)
         rep = [run(a, b, k) for k in range(n)]
         raw = [run(a, b, k, repair=False)[0] for k in range(n)]
         print(f"never-seen {s} (second person {o}), seeds 0-{n - 1}: joint error mm {spread([r[0] for r in rep])}; "
