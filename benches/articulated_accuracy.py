@@ -132,7 +132,7 @@ from pathlib import Path
 import numpy as np
 
 import socialcam as sc
-from socialcam.mocap import load_bvh, load_c3d
+from socialcam.mocap import BvhMotion, load_bvh, load_c3d
 from socialcam.synth.cameras import look_at
 
 ROOT = Path(__file__).resolve().parent.parent
@@ -163,15 +163,21 @@ def bvh_clip(name: str) -> tuple[np.ndarray, list[tuple[int, int]]]:
     return m.positions[:, keep], pairs
 
 
-def fair_clip(name: str) -> tuple[np.ndarray, list[tuple[int, int]]]:
-    """A FAIR clip (AnimatedDrawings' ``fair1`` BVH files): z up and a unit the files do not
-    state; FAIR_METRES_PER_UNIT makes the actor 1.64 m tall with 0.43 m thighs, and the
-    positions are turned to y up like the CMU clips."""
+def fair_motion(name: str) -> tuple[BvhMotion, np.ndarray]:
+    """A FAIR BVH file (AnimatedDrawings' ``fair1``): z up and a unit the files do not state;
+    FAIR_METRES_PER_UNIT makes the actor 1.64 m tall with 0.43 m thighs. Returns the motion
+    and its positions (T, joints, 3) turned to y up like the CMU clips."""
     m = load_bvh(MOCAP / name, scale=FAIR_METRES_PER_UNIT)
+    P = m.positions
+    return m, np.stack([P[..., 0], P[..., 2], -P[..., 1]], axis=-1)
+
+
+def fair_clip(name: str) -> tuple[np.ndarray, list[tuple[int, int]]]:
+    """A FAIR clip (:func:`fair_motion`): positions (F, J, 3) and (child, parent) pairs."""
+    m, P = fair_motion(name)
     sk, keep = sc.Skeleton.from_bvh(m)
     pairs = [(j, sk.parents[j]) for j in range(len(sk.names)) if sk.parents[j] != -1]
-    P = m.positions[:, keep]
-    return np.stack([P[..., 0], P[..., 2], -P[..., 1]], axis=-1), pairs
+    return P[:, keep], pairs
 
 
 def c3d_clip(name: str) -> tuple[np.ndarray, list[tuple[int, int]]]:

@@ -14,6 +14,7 @@ import sys
 from pathlib import Path
 
 import numpy as np
+from articulated_accuracy import fair_motion  # the same FAIR loading as the articulated bench
 
 from socialcam.bodies import reconstruct_body
 from socialcam.mocap import load_bvh
@@ -32,28 +33,25 @@ CLIPS = (
 # the second person in some photos from subject 131's walking.
 NEVER_SEEN = (("14_jumping_jacks30", "131_01_walk300"),)
 # Session 32's never-seen capture system (defined before it was run, after k_max 12 -> 24): two
-# FAIR actors (AnimatedDrawings' fair1 BVH files: z up, 0.04 m per unit assumed as in
-# benches/articulated_accuracy.py), a jump and a wave of 2.5 s at 119.9 Hz, each the other's
+# FAIR actors (AnimatedDrawings' fair1 BVH files, loaded as benches/articulated_accuracy.py
+# does: y up, 0.04 m per unit assumed), a jump and a wave of 2.5 s at 119.9 Hz, each the other's
 # second person. FAIR's joints named as the pose model's: its arm, forearm and hand are the
 # shoulder, elbow and wrist; its up-leg, leg and foot the hip, knee and ankle.
 FAIR_CLIPS = (("fair_jumping300", "fair_wave300"), ("fair_wave300", "fair_jumping300"))
 FAIR_NAMES = {"Shoulder": "Arm", "Elbow": "ForeArm", "Wrist": "Hand", "Hip": "UpLeg",
               "Knee": "Leg", "Ankle": "Foot"}  # fmt: skip
-FAIR_METRES_PER_UNIT = 0.04
 
 
 class _Clip:
     """A FAIR clip as the photo simulator takes a BVH motion: y up, metres, BODY_JOINTS."""
 
     def __init__(self, name: str) -> None:
-        m = load_bvh(DATA / f"{name}.bvh", scale=FAIR_METRES_PER_UNIT)
+        m, P = fair_motion(f"{name}.bvh")
         idx = []
         for joint in BODY_JOINTS:
             side = next((s for s in ("Left", "Right") if joint.startswith(s)), "")
             idx.append(m.names.index(side + FAIR_NAMES.get(joint[len(side) :], joint[len(side) :])))
-        P = m.positions[:, idx]
-        self.positions = np.stack([P[..., 0], P[..., 2], -P[..., 1]], axis=-1)
-        self.names, self.fps = list(BODY_JOINTS), m.fps
+        self.positions, self.names, self.fps = P[:, idx], list(BODY_JOINTS), m.fps
 
 
 def run(subject, other, seed: int, repair: bool = True, **kw) -> tuple[float, float]:
@@ -72,23 +70,21 @@ def spread(v: list[float]) -> str:
 def main(argv: list[str]) -> None:
     n = int(argv[0]) if argv else 10
     clips = {c: load_bvh(DATA / f"cmu_{c}300.bvh") for pair in CLIPS for c in pair}
-    for s, o in CLIPS:
-        rep = [run(clips[s], clips[o], k) for k in range(n)]
-        raw = [run(clips[s], clips[o], k, repair=False)[0] for k in range(n)]
-        print(f"{s} (second person {o}), seeds 0-{n - 1}: joint error mm {spread([r[0] for r in rep])}; "
+
+    def compare(label: str, a, b) -> None:
+        """One row: seeds 0..n-1 with and without swap repair."""
+        rep = [run(a, b, k) for k in range(n)]
+        raw = [run(a, b, k, repair=False)[0] for k in range(n)]
+        print(f"{label}, seeds 0-{n - 1}: joint error mm {spread([r[0] for r in rep])}; "
               f"without swap repair {spread(raw)}; right detection chosen >= {min(r[1] for r in rep):.3f}")  # fmt: skip
+
+    for s, o in CLIPS:
+        compare(f"{s} (second person {o})", clips[s], clips[o])
     for s, o in NEVER_SEEN:
         a, b = load_bvh(DATA / f"cmu_{s}.bvh"), load_bvh(DATA / f"cmu_{o}.bvh")
-        rep = [run(a, b, k) for k in range(n)]
-        raw = [run(a, b, k, repair=False)[0] for k in range(n)]
-        print(f"never-seen {s} (second person {o}), seeds 0-{n - 1}: joint error mm {spread([r[0] for r in rep])}; "
-              f"without swap repair {spread(raw)}; right detection chosen >= {min(r[1] for r in rep):.3f}")  # fmt: skip
+        compare(f"never-seen {s} (second person {o})", a, b)
     for s, o in FAIR_CLIPS:
-        a, b = _Clip(s), _Clip(o)
-        rep = [run(a, b, k) for k in range(n)]
-        raw = [run(a, b, k, repair=False)[0] for k in range(n)]
-        print(f"never-seen {s} (second person {o}), seeds 0-{n - 1}: joint error mm {spread([r[0] for r in rep])}; "
-              f"without swap repair {spread(raw)}; right detection chosen >= {min(r[1] for r in rep):.3f}")  # fmt: skip
+        compare(f"never-seen {s} (second person {o})", _Clip(s), _Clip(o))
     s, o = CLIPS[0]
     for kw in (
         {"swap": 0.15, "pair_swap": 0.05},
