@@ -136,6 +136,9 @@ class BodyOptions:
         14's jumping jacks (4.2 s) with 100 photos the median joint error falls 53.7 → 18.9
         mm, while subject 131's walking (2.5 s, 60 photos) moves by 1 mm or less
         (``benches/bodies_accuracy.py``).
+    fuse_rays : move each joint, in every photo that detected it, towards its ray by the
+        share of its residual the trajectory does not explain (:func:`_fuse_rays`; False:
+        return the trajectories at the photo times, as until session 33)
     """
 
     gate: float = 0.25
@@ -144,6 +147,7 @@ class BodyOptions:
     pair_ratio: float = 0.5
     repair_swaps: bool = True
     k_max: int = 24
+    fuse_rays: bool = True
 
     def __post_init__(self) -> None:
         check_float(self.gate, "gate", min=0.0, min_exclusive=True)
@@ -152,6 +156,7 @@ class BodyOptions:
         check_float(self.pair_ratio, "pair_ratio", min=0.0, max=1.0)
         check_int(self.k_max, "k_max", min=1)
         check_bool(self.repair_swaps, "repair_swaps")
+        check_bool(self.fuse_rays, "fuse_rays")
 
 
 @dataclass(frozen=True)
@@ -160,11 +165,16 @@ class Body:
 
     Attributes
     ----------
-    points : (F, J, 3) joints at the photo times, metres (NaN: joint not reconstructed)
+    points : (F, J, 3) joints at the photo times, metres (NaN: joint not reconstructed):
+        ``smooth`` moved towards each detection's ray (``BodyOptions.fuse_rays``)
+    smooth : (F, J, 3) each joint's DCT trajectory at the photo times, metres
     k : (J,) DCT basis size of each joint's trajectory
     chosen : (F,) index of the detection that is this person in each photo (−1: absent)
     swapped : (F, P) left/right pairs found swapped (and repaired) per photo
     failures : (J,) why a joint could not be reconstructed (``None`` = reconstructed)
+    noise : (J,) pixel noise of each joint's detections estimated from the photos (standard
+        deviation per coordinate, px; NaN: not estimated)
+    weight : (J,) how far ``points`` moved from ``smooth`` towards the rays, in [0, 1]
     """
 
     points: FloatArray
@@ -172,6 +182,9 @@ class Body:
     chosen: npt.NDArray[np.int64]
     swapped: npt.NDArray[np.bool_]
     failures: tuple[str | None, ...]
+    smooth: FloatArray
+    noise: FloatArray
+    weight: FloatArray
 
 
 def _centre(uv: FloatArray, pairs: Sequence[tuple[int, int]]) -> FloatArray:
@@ -319,13 +332,76 @@ def reconstruct_body(
             x[a, sel], x[b, sel] = x[b, sel].copy(), x[a, sel].copy()
         swapped ^= change
     batch = reconstruct_trajectories(x, cameras, options=topts)
+    k = np.asarray(batch.k, np.int64)
+    if o.fuse_rays:
+        fused, noise, weight = _fuse_rays(x, cameras, batch.points, k)
+    else:
+        fused, noise, weight = batch.points, np.full(J, np.nan), np.zeros(J)
     return Body(
-        points=readonly(np.transpose(batch.points, (1, 0, 2)).copy()),
-        k=readonly(np.asarray(batch.k, np.int64)),
+        points=readonly(np.transpose(fused, (1, 0, 2)).copy()),
+        k=readonly(k),
         chosen=readonly(chosen),
         swapped=readonly(swapped),
         failures=tuple(batch.failures),
+        smooth=readonly(np.transpose(batch.points, (1, 0, 2)).copy()),
+        noise=readonly(noise),
+        weight=readonly(weight),
     )
+
+
+def _fuse_rays(
+    x: FloatArray, cams: Any, P: FloatArray, k: npt.NDArray[np.int64]
+) -> tuple[FloatArray, FloatArray, FloatArray]:
+    """Each joint's trajectory points ``P (J, F, 3)`` moved towards the rays of its
+    detections ``x (J, F, 2)``; returns the points, the pixel noise ``(J,)`` and the
+    weights ``(J,)``.
+
+    With a few photos a second, a DCT basis small enough to be reconstructable (Ch. 5) cannot
+    follow fast motion: the trajectory passes beside the joint, mostly across the rays (CMU
+    subject 14's jumping jacks, 60 photos: median error across the rays 18–44 mm, along them
+    12–17 mm). The detection itself is off its joint by the pose model's noise only. Per joint,
+    the in-sample reprojection residual of the ``k``-vector fit (``n`` photos, leverage
+    ``h = 3k / 2n``) has a variance per coordinate ``s² = mean ‖r‖² / 2(1 − h)``: the noise
+    ``σ²`` plus the motion the basis misses, ``s² − σ²``. The noise comes from a rich fit of
+    ``⌊n/2⌋`` vectors (its reprojection error is the noise, whatever its depth), ``σ² = RSS /
+    (2n − 3⌊n/2⌋)``, as Mallows' Cp takes it from the largest model. Each point then moves
+    across its ray, towards it, by ``w = (s² − σ²)⁺ / ((s² − σ²)⁺ + σ²)``, the weight that
+    combines two independent estimates; its depth along the ray is kept. A well-fitted joint
+    keeps ``w`` near 0; noise that differs between joints is estimated per joint.
+    """
+    from socialcam.errors import DegenerateError
+    from socialcam.trajectory import TrajectoryOptions, reconstruct_trajectories
+
+    J = len(x)
+    out, noise, weight = P.copy(), np.full(J, np.nan), np.zeros(J)
+    uv = _project(cams, P)  # (J, F, 2)
+    h1 = np.concatenate([x, np.ones((*x.shape[:2], 1))], axis=-1)  # (J, F, 3)
+    rays = np.einsum("fji,fjk,Jfk->Jfi", cams.R, np.linalg.inv(cams.K), h1)  # Rᵀ K⁻¹ x̃
+    rays /= np.linalg.norm(rays, axis=-1, keepdims=True)
+    for j in range(J):
+        seen = np.isfinite(x[j]).all(axis=1) & np.isfinite(P[j]).all(axis=1)
+        n, kb = int(seen.sum()), int(seen.sum()) // 2
+        if k[j] < 1 or kb <= k[j]:
+            continue  # too few photos for a richer fit than the trajectory's own
+        r2 = ((x[j, seen] - uv[j, seen]) ** 2).sum(axis=1)
+        s2 = r2.mean() / (2.0 * (1.0 - 3.0 * k[j] / (2.0 * n)))
+        xj = np.where(seen[:, None], x[j], np.nan)[None]
+        try:
+            rich = reconstruct_trajectories(xj, cams, options=TrajectoryOptions(k=kb)).points
+        except DegenerateError:
+            continue
+        rr = ((x[j, seen] - _project(cams, rich)[0, seen]) ** 2).sum()
+        if not np.isfinite(rr):
+            continue
+        sig2 = max(float(rr) / (2 * n - 3 * kb), 1e-12)
+        sp2 = max(float(s2) - sig2, 0.0)
+        w = sp2 / (sp2 + sig2)
+        d = rays[j, seen]
+        v = P[j, seen] - cams.C[seen]
+        across = d * (v * d).sum(axis=1, keepdims=True) - v  # from the point to its ray
+        out[j, seen] = P[j, seen] + w * across
+        noise[j], weight[j] = np.sqrt(sig2), w
+    return out, noise, weight
 
 
 #: MediaPipe Pose landmarks of each joint of ``synth.photos.BODY_JOINTS`` (its "left" is
