@@ -197,6 +197,38 @@ def test_pixel_noise_is_estimated_per_joint(clips):
         assert (plain.weight == 0).all() and np.isnan(plain.noise).all()
 
 
+#: FAIR's BVH joint names (AnimatedDrawings' fair1 files) of the pose model's joints
+_FAIR = {"Shoulder": "Arm", "Elbow": "ForeArm", "Wrist": "Hand", "Hip": "UpLeg", "Knee": "Leg",
+         "Ankle": "Foot"}  # fmt: skip
+
+
+def _fair_clip(name: str, frames: int) -> tuple[np.ndarray, list[str], float]:
+    """A FAIR clip as ``photo_collection`` takes it: y up, metres (0.04 m per file unit,
+    as ``benches/articulated_accuracy.py`` assumes), the pose model's joint names."""
+    m = load_bvh(DATA / f"{name}.bvh", scale=0.04, frames=slice(0, frames))
+    P = np.stack([m.positions[..., 0], m.positions[..., 2], -m.positions[..., 1]], axis=-1)
+    fair = {}
+    for joint in BODY_JOINTS:
+        side = next((s for s in ("Left", "Right") if joint.startswith(s)), "")
+        fair[side + _FAIR.get(joint[len(side) :], joint[len(side) :])] = joint
+    # FAIR's own "LeftShoulder" is the clavicle: every joint not renamed is kept out of the way
+    return P, [fair.get(n, "_" + n) for n in m.names], m.fps
+
+
+def test_a_long_collection_gets_a_larger_basis():
+    """FAIR's dab, 11.3 s of dancing at 30 Hz, in 270 photos (the walking clips' 24 a
+    second). With ``k_max`` fixed at 24 cross validation could not follow it (median 29.3 mm
+    over seeds 0–4, 28.0–34.3; seed 2: 28.0); the default's 8 vectors a second (91 here) let
+    it pick 52–66 (24.2 mm, 22.0–26.6; seed 2: 22.0)."""
+    P, names, fps = _fair_clip("fair_dab339", 339)
+    Q, _, _ = _fair_clip("fair_zombie400", 339)
+    pc = photo_collection(P, names, fps, other=Q, n_photos=270, seed=2)
+    body = reconstruct_body(pc.detections, pc.cameras, BODY_PAIRS)
+    err = np.median(np.linalg.norm(body.points - pc.points, axis=-1))
+    assert err <= 0.025, err
+    assert body.k.max() > 24
+
+
 def test_a_detection_without_joints_is_no_warning(clips):
     """A detection whose joints are all missing has no centre: it is never chosen, and no
     numpy warning escapes (pytest turns warnings into errors)."""

@@ -15,6 +15,7 @@ on a real photograph.
 from __future__ import annotations
 
 import datetime as _dt
+import math
 import os
 from collections.abc import Sequence
 from dataclasses import dataclass
@@ -131,11 +132,13 @@ class BodyOptions:
     folds : swap repair judges each photo by trajectories fitted without it, in this many
         folds of the photos; a pair is exchanged when its error swapped drops below
         ``pair_ratio`` × the unswapped one
-    k_max : largest DCT basis size per joint tried by cross validation (Eq 5.8). 24 (12
-        until session 32): fast motion over a few seconds needs more than 12; on CMU subject
-        14's jumping jacks (4.2 s) with 100 photos the median joint error falls 53.7 → 18.9
-        mm, while subject 131's walking (2.5 s, 60 photos) moves by 1 mm or less
-        (``benches/bodies_accuracy.py``).
+    k_max : largest DCT basis size per joint tried by cross validation (Eq 5.8); ``None``
+        (default): 8 per second of the photos' time span, at least 24 and at most 128. A
+        fixed 24 (12 until session 32) caps longer collections: FAIR's 11.3 s dab with 270
+        photos (the walking clips' photo rate) got 29.3 mm at 24, 24.8 mm at 48 and 24.2 mm
+        at 96, where cross validation picks 49–66 vectors (about 5 a second); on CMU
+        subject 14's jumping jacks (4.2 s, 100 photos) 12 gave 53.7 mm and 24 18.9 mm, with
+        32 and 48 the same (``benches/bodies_accuracy.py``).
     fuse_rays : move each joint, in every photo that detected it, towards its ray by the
         share of its residual the trajectory does not explain (:func:`_fuse_rays`; False:
         return the trajectories at the photo times, as until session 33)
@@ -146,7 +149,7 @@ class BodyOptions:
     folds: int = 5
     pair_ratio: float = 0.5
     repair_swaps: bool = True
-    k_max: int = 24
+    k_max: int | None = None
     fuse_rays: bool = True
 
     def __post_init__(self) -> None:
@@ -154,7 +157,8 @@ class BodyOptions:
         check_int(self.rounds, "rounds", min=1, max=20)
         check_int(self.folds, "folds", min=2)
         check_float(self.pair_ratio, "pair_ratio", min=0.0, max=1.0)
-        check_int(self.k_max, "k_max", min=1)
+        if self.k_max is not None:
+            check_int(self.k_max, "k_max", min=1)
         check_bool(self.repair_swaps, "repair_swaps")
         check_bool(self.fuse_rays, "fuse_rays")
 
@@ -269,7 +273,9 @@ def reconstruct_body(
     for a, b in pairs:
         if not (0 <= a < J and 0 <= b < J and a != b):
             raise ValueError(f"pairs: ({a}, {b}) is not a pair of joints in 0..{J - 1}")
-    topts = TrajectoryOptions(k_max=o.k_max)
+    span = float(np.ptp(cameras.times)) if F else 0.0
+    k_max = o.k_max if o.k_max is not None else min(128, max(24, math.ceil(8.0 * span)))
+    topts = TrajectoryOptions(k_max=k_max)
     centres = [_centre(d, pairs) if len(d) else np.zeros((0, 2)) for d in dets]
     sizes = [_size(d) if len(d) else np.zeros(0) for d in dets]
     # the start: photos with exactly one detection that has a joint (an empty one is no one)
