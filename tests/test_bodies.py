@@ -91,6 +91,10 @@ def test_bad_input(clips):
         reconstruct_body(two, cams, BODY_PAIRS)
     with pytest.raises(ValueError, match="gate"):
         reconstruct_body(dets, cams, BODY_PAIRS, gate=0.0)
+    with pytest.raises(ValueError, match="fuse_rays"):
+        reconstruct_body(dets, cams, BODY_PAIRS, fuse_rays="yes")
+    with pytest.raises(ValueError, match="k_max"):
+        reconstruct_body(dets, cams, BODY_PAIRS, k_max=0)
     with pytest.raises(ValueError, match="swap"):
         photo_collection(m.positions, m.names, m.fps, swap=1.5)
     # a photo in which nobody was found

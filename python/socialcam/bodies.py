@@ -236,6 +236,9 @@ def reconstruct_body(
        each left/right pair of each photo is exchanged when that reprojects closer; refit,
        repeat until nothing changes (or ``rounds``).
     3. The final per-joint trajectories, each with its own K (cross validation, Eq 5.8).
+    4. Each joint, in every photo that detected it, moved towards its ray by the share of
+       its residual that its trajectory does not explain (``fuse_rays``; ``Body.smooth``
+       keeps the trajectories, ``Body.noise`` the pixel noise estimated per joint).
 
     Parameters
     ----------
