@@ -572,6 +572,7 @@ PARTS = (
     "final28",
     "jacks",
     "fair",
+    "final29",
 )
 # Session 8's never-seen cuts: every clip sampled at 40 Hz (every third frame) from
 # frames 10 and 100, 60 frames each (the other parts sample every second frame).
@@ -656,6 +657,13 @@ HOP_CUTS = ((2, 0), (2, 30), (2, 60), (2, 90), (2, 120), (3, 10), (3, 100), (4, 
 FINAL28_CUTS = ((2, 43), (2, 113), (4, 39))
 FINAL28_C3D_CUTS = ((3, 117), (3, 417), (1, 707))
 FINAL28_HOP_CUTS = ((2, 45), (2, 165), (3, 55))
+# Session 33's never-seen cuts (defined and committed before they were run; the articulated
+# method unchanged since final26): every clip but the hop cuts at 60 Hz from 63 and 127 and at
+# 40 Hz from 29; 85_02 at 60 Hz from 623, 40 Hz from 263 and 30 Hz from 143; both hop cuts at
+# 60 Hz from 15 and 135 and at 40 Hz from 77 (start frames no other part uses at these rates).
+FINAL29_CUTS = ((2, 63), (2, 127), (3, 29))
+FINAL29_C3D_CUTS = ((2, 623), (3, 263), (4, 143))
+FINAL29_HOP_CUTS = ((2, 15), (2, 135), (3, 77))
 # Session 32's never-seen person (defined before it was run; no method change since final26): a
 # CMU clip of jumping jacks by another subject (CMU subject 14 by its skeleton's offsets; same
 # 30-joint skeleton, longer bones), 125 frames at 30 Hz as shipped. Windows at 30 Hz from frames
@@ -776,6 +784,9 @@ def all_windows(
     wins += cut("final28", FINAL28_HOP_CUTS, hop)
     wins += cut("jacks", JACKS_CUTS, tuple(n for n in clips if n == "jacks"))
     wins += cut("fair", FAIR_CUTS, tuple(n for n in clips if n in FAIR_CLIPS))
+    wins += cut("final29", FINAL29_CUTS)
+    wins += cut("final29", FINAL29_C3D_CUTS, c3d)
+    wins += cut("final29", FINAL29_HOP_CUTS, hop)
     return wins
 
 
