@@ -13,7 +13,7 @@ import pytest
 
 from socialcam.bodies import reconstruct_body
 from socialcam.mocap import load_bvh
-from socialcam.synth.photos import BODY_JOINTS, BODY_PAIRS, photo_collection
+from socialcam.synth.photos import BODY_BONES, BODY_JOINTS, BODY_PAIRS, photo_collection
 
 DATA = Path(__file__).parent / "data" / "mocap"
 
@@ -245,3 +245,26 @@ def test_a_detection_without_joints_is_no_warning(clips):
     body = reconstruct_body(dets, pc.cameras, BODY_PAIRS)
     assert (body.chosen == 0).all()
     assert np.isfinite(body.points).all()
+
+
+def test_plot_body_shows_each_joints_error(clips):
+    """The figure draws the skeleton at the photos shown and, per joint, the median error of
+    the body and of its trajectories alone; bad bones are a clear error."""
+    import matplotlib.pyplot as plt
+
+    from socialcam.viz import plot_body
+
+    pc, body = _run(clips, "131_01_walk", "131_02_walk", 0)
+    fig = plot_body(pc.cameras, body.points, BODY_BONES, truth=pc.points, smooth=body.smooth,
+                    names=BODY_JOINTS, n_shown=4)  # fmt: skip
+    ax3d, ax = fig.axes
+    assert len(ax3d.lines) == 4 * 2 * len(BODY_BONES)  # truth and body per photo shown
+    bars = [p.get_height() for p in ax.patches]
+    want = 1e3 * np.median(np.linalg.norm(body.points - pc.points, axis=2), axis=0)
+    alone = 1e3 * np.median(np.linalg.norm(body.smooth - pc.points, axis=2), axis=0)
+    np.testing.assert_allclose(bars, np.r_[want, alone], rtol=1e-9)
+    plt.close(fig)
+    with pytest.raises(ValueError, match="bones"):
+        plot_body(pc.cameras, body.points, [(0, 13)])
+    with pytest.raises(ValueError, match="points"):
+        plot_body(pc.cameras, body.points[:-1], BODY_BONES)

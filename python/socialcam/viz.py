@@ -123,6 +123,68 @@ def plot_trajectories(
     return fig
 
 
+def plot_body(
+    cameras: Cameras,
+    points: npt.ArrayLike,
+    bones: Any,
+    *,
+    truth: npt.ArrayLike | None = None,
+    smooth: npt.ArrayLike | None = None,
+    names: Any = None,
+    n_shown: int = 6,
+    title: str = "",
+) -> Any:
+    """A skeleton over a photo collection (:func:`socialcam.bodies.reconstruct_body`):
+    ``points (F, J, 3)`` drawn with its ``bones`` (pairs of joint indices, e.g.
+    ``synth.photos.BODY_BONES``) at ``n_shown`` photos spread over time (coloured from early
+    to late; the truth in grey when given); beside it, when
+    ``truth (F, J, 3)`` is given, each joint's median 3D error over the photos, mm (and that
+    of ``smooth``, e.g. ``Body.smooth``, the trajectories before the ray fusion). Returns the
+    figure.
+    """
+    from socialcam._validate import as_float_array
+
+    plt = _plt()
+    P = as_float_array(points, "points", (len(cameras), None, 3), allow_nan=True)
+    F, J = P.shape[:2]
+    bones_ = [(int(a), int(b)) for a, b in bones]
+    if any(not (0 <= a < J and 0 <= b < J) for a, b in bones_):
+        raise ValueError(f"bones: every pair must index joints 0..{J - 1}")
+    T = None if truth is None else as_float_array(truth, "truth", (F, J, 3), allow_nan=True)
+    S = None if smooth is None else as_float_array(smooth, "smooth", (F, J, 3), allow_nan=True)
+    t = np.arange(F, dtype=float) if cameras.times is None else np.asarray(cameras.times)
+    order = np.argsort(t, kind="stable")
+    shown = order[np.unique(np.linspace(0, F - 1, min(max(n_shown, 1), F)).round().astype(int))]
+    fig = plt.figure(figsize=(11, 4.5) if T is not None else (6, 4.5))
+    ax = fig.add_subplot(1, 2 if T is not None else 1, 1, projection="3d")
+    cmap = plt.get_cmap("viridis")
+    for i, f in enumerate(shown):
+        colour = cmap(i / max(len(shown) - 1, 1))
+        for k, (a, b) in enumerate(bones_):
+            if T is not None:
+                ax.plot(*T[f, [a, b]].T, c="0.6", lw=1, label="truth" if i == k == 0 else None)
+            ax.plot(*P[f, [a, b]].T, c=colour, lw=2, label=f"t = {t[f]:.2f} s" if k == 0 else None)
+    set_equal_aspect(ax, P[shown].reshape(-1, 3) if T is None else np.r_[P[shown], T[shown]])
+    ax.legend(loc="upper left", fontsize=7)
+    ax.set_title(title)
+    if T is not None:
+        ax2 = fig.add_subplot(1, 2, 2)
+        x = np.arange(J)
+        err = 1e3 * np.nanmedian(np.linalg.norm(P - T, axis=2), axis=0)
+        width = 0.4 if S is not None else 0.8
+        ax2.bar(x, err, width=width, color="tab:red", label="body")
+        if S is not None:
+            e_s = 1e3 * np.nanmedian(np.linalg.norm(S - T, axis=2), axis=0)
+            ax2.bar(x + width, e_s, width=width, color="0.6", label="trajectories alone")
+        ax2.set_xticks(x + (width / 2 if S is not None else 0))
+        ax2.set_xticklabels(list(names) if names is not None else [str(j) for j in x],
+                            rotation=60, ha="right", fontsize=7)  # fmt: skip
+        ax2.set_ylabel("median 3D error over the photos [mm]")
+        ax2.legend()
+    fig.tight_layout()
+    return fig
+
+
 def _track_colour(tid: int) -> Any:
     plt = _plt()
     return plt.get_cmap("tab10")(tid % 10) if tid >= 0 else "0.6"

@@ -35,6 +35,10 @@ BODY_JOINTS = (
     "RightAnkle",
 )
 BODY_PAIRS = ((1, 2), (3, 4), (5, 6), (7, 8), (9, 10), (11, 12))
+#: lines between joints of :data:`BODY_JOINTS` that draw a skeleton (head to shoulders, arms,
+#: trunk, legs), e.g. for :func:`socialcam.viz.plot_body`
+BODY_BONES = ((0, 1), (0, 2), (1, 2), (1, 3), (3, 5), (2, 4), (4, 6), (1, 7), (2, 8), (7, 8),
+              (7, 9), (9, 11), (8, 10), (10, 12))  # fmt: skip
 #: CMU BVH files are Y-up; ours are Z-up (x, y, z) ← (x, −z, y)
 Y_UP_TO_Z_UP = np.array([[1.0, 0.0, 0.0], [0.0, 0.0, -1.0], [0.0, 1.0, 0.0]])
 
