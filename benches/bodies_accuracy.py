@@ -3,7 +3,7 @@
 without swap repair, and the share of photos where the photographed person's detection was
 chosen; then harder settings (more swaps, more pixel noise, fewer photos, a second person in
 most photos), a never-seen person (NEVER_SEEN) and capture system (FAIR_CLIPS), and clips first
-run in session 33 (NEVER_SEEN_33, FAIR_33). Each row also gives the trajectories alone, before
+run in session 33 (NEVER_SEEN_33, FAIR_33, ROKOKO_33). Each row also gives the trajectories alone, before
 the ray fusion (``Body.smooth``). The 2D joints
 are simulated (``socialcam.synth.photos``), no pose model runs.
 
@@ -47,8 +47,26 @@ FAIR_CLIPS = (("fair_jumping300", "fair_wave300"), ("fair_wave300", "fair_jumpin
 # the other's second person).
 NEVER_SEEN_33 = (("131_03_hop300a", "131_03_hop300b"), ("131_03_hop300b", "131_03_hop300a"))
 FAIR_33 = (("fair_dab339", "fair_zombie400"), ("fair_zombie400", "fair_dab339"))
+# Session 33's never-seen capture system and person (defined and committed before it was run,
+# after the ray fusion and k_max's new default): a dance captured with a Rokoko inertial suit
+# (AnimatedDrawings' rokoko/jesse_dance, y up, centimetres, FAIR's joint names), frames 0-299
+# (3 s at 100 Hz) with frames 100-399 of the same dance as the second person.
+ROKOKO_33 = "rokoko_jesse_dance400"
 FAIR_NAMES = {"Shoulder": "Arm", "Elbow": "ForeArm", "Wrist": "Hand", "Hip": "UpLeg",
               "Knee": "Leg", "Ankle": "Foot"}  # fmt: skip
+
+
+class _Rokoko:
+    """ROKOKO_33 as the photo simulator takes a BVH motion: y up, metres, BODY_JOINTS."""
+
+    def __init__(self, start: int, frames: int = 300) -> None:
+        m = load_bvh(DATA / f"{ROKOKO_33}.bvh", scale=0.01)
+        idx = []
+        for joint in BODY_JOINTS:
+            side = next((s for s in ("Left", "Right") if joint.startswith(s)), "")
+            idx.append(m.names.index(side + FAIR_NAMES.get(joint[len(side) :], joint[len(side) :])))
+        self.positions = m.positions[start : start + frames][:, idx]
+        self.names, self.fps = list(BODY_JOINTS), m.fps
 
 
 class _Clip:
@@ -107,6 +125,7 @@ def main(argv: list[str]) -> None:
         compare(f"never-seen 33 {s} (second person {o})", a, b)
     for s, o in FAIR_33:
         compare(f"never-seen 33 {s} (second person {o})", _Clip(s, 339), _Clip(o, 339))
+    compare(f"never-seen 33 {ROKOKO_33} 0-299 (second person 100-399)", _Rokoko(0), _Rokoko(100))
     s, o = CLIPS[0]
     for kw in (
         {"swap": 0.15, "pair_swap": 0.05},
