@@ -56,16 +56,21 @@ FAIR_NAMES = {"Shoulder": "Arm", "Elbow": "ForeArm", "Wrist": "Hand", "Hip": "Up
               "Knee": "Leg", "Ankle": "Foot"}  # fmt: skip
 
 
+def _body_index(names: list[str]) -> list[int]:
+    """Indices in ``names`` (FAIR's and Rokoko's joint names) of the pose model's BODY_JOINTS."""
+    idx = []
+    for joint in BODY_JOINTS:
+        side = next((s for s in ("Left", "Right") if joint.startswith(s)), "")
+        idx.append(names.index(side + FAIR_NAMES.get(joint[len(side) :], joint[len(side) :])))
+    return idx
+
+
 class _Rokoko:
     """ROKOKO_33 as the photo simulator takes a BVH motion: y up, metres, BODY_JOINTS."""
 
     def __init__(self, start: int, frames: int = 300) -> None:
         m = load_bvh(DATA / f"{ROKOKO_33}.bvh", scale=0.01)
-        idx = []
-        for joint in BODY_JOINTS:
-            side = next((s for s in ("Left", "Right") if joint.startswith(s)), "")
-            idx.append(m.names.index(side + FAIR_NAMES.get(joint[len(side) :], joint[len(side) :])))
-        self.positions = m.positions[start : start + frames][:, idx]
+        self.positions = m.positions[start : start + frames][:, _body_index(m.names)]
         self.names, self.fps = list(BODY_JOINTS), m.fps
 
 
@@ -74,12 +79,8 @@ class _Clip:
 
     def __init__(self, name: str, frames: int | None = None) -> None:
         m, P = fair_motion(f"{name}.bvh")
-        P = P[:frames]
-        idx = []
-        for joint in BODY_JOINTS:
-            side = next((s for s in ("Left", "Right") if joint.startswith(s)), "")
-            idx.append(m.names.index(side + FAIR_NAMES.get(joint[len(side) :], joint[len(side) :])))
-        self.positions, self.names, self.fps = P[:, idx], list(BODY_JOINTS), m.fps
+        self.positions = P[:frames][:, _body_index(m.names)]
+        self.names, self.fps = list(BODY_JOINTS), m.fps
 
 
 def run(

@@ -391,9 +391,6 @@ def _fuse_rays(
     J = len(x)
     out, noise, weight = P.copy(), np.full(J, np.nan), np.zeros(J)
     uv = _project(cams, P)  # (J, F, 2)
-    h1 = np.concatenate([x, np.ones((*x.shape[:2], 1))], axis=-1)  # (J, F, 3)
-    rays = np.einsum("fji,fjk,Jfk->Jfi", cams.R, np.linalg.inv(cams.K), h1)  # Rᵀ K⁻¹ x̃
-    rays /= np.linalg.norm(rays, axis=-1, keepdims=True)
     for j in range(J):
         seen = np.isfinite(x[j]).all(axis=1) & np.isfinite(P[j]).all(axis=1)
         n, kb = int(seen.sum()), int(seen.sum()) // 2
@@ -412,7 +409,7 @@ def _fuse_rays(
         sig2 = max(float(rr) / (2 * n - 3 * kb), 1e-12)
         sp2 = max(float(s2) - sig2, 0.0)
         w = sp2 / (sp2 + sig2)
-        d = rays[j, seen]
+        d = cams[seen].back_project(x[j, seen])  # unit ray directions (n, 3)
         v = P[j, seen] - cams.C[seen]
         across = d * (v * d).sum(axis=1, keepdims=True) - v  # from the point to its ray
         out[j, seen] = P[j, seen] + w * across
