@@ -9,7 +9,10 @@ detection is the person in each photo, left/right swaps repaired, and one trajec
 joint (:func:`socialcam.reconstruct_trajectories`, Ch. 5). The 2D joints come from the
 caller or from :func:`detect_body_joints` (MediaPipe Pose, an optional install, see there);
 the geometry is tested on simulated detections (``socialcam.synth.photos``), the pose model
-on a real photograph.
+on a real photograph. :func:`reconstruct_body_from_photos` (``socialcam bodies`` on the
+command line) runs the whole chain on photo files: times, poses (structure from motion or a
+given COLMAP model), 2D joints undistorted with each photo's lens, skeleton;
+:func:`write_body` writes it out.
 """
 
 from __future__ import annotations
@@ -437,10 +440,11 @@ _MEDIAPIPE_JOINTS: dict[str, tuple[int, ...]] = {
 
 
 def detect_body_joints(
-    images: Sequence[npt.ArrayLike] | npt.ArrayLike,
+    images: Sequence[npt.ArrayLike | str | os.PathLike[str]] | npt.ArrayLike,
     *,
     min_visibility: float = 0.5,
     model_complexity: int = 1,
+    progress: bool = False,
 ) -> list[FloatArray]:
     """2D body joints of the person in each photo, from MediaPipe Pose (CPU, offline: its
     models are inside the wheel). Install: ``pip install --no-deps
@@ -449,10 +453,13 @@ def detect_body_joints(
 
     Parameters
     ----------
-    images : one ``(H, W, 3)`` uint8 RGB photo or a sequence of them (any sizes)
+    images : one ``(H, W, 3)`` uint8 RGB photo or a sequence of them (any sizes), or of
+        image files (read one at a time, in their stored pixel orientation, as COLMAP reads
+        them: an EXIF rotation flag is not applied)
     min_visibility : a joint MediaPipe rates less visible (or that lies outside the photo)
         is NaN
     model_complexity : 0 (lite) or 1 (full); both ship with the wheel
+    progress : a progress bar over the photos (tqdm)
 
     Returns
     -------
@@ -469,12 +476,23 @@ def detect_body_joints(
     mc = check_int(model_complexity, "model_complexity", min=0, max=1)
     if isinstance(images, np.ndarray) and images.ndim == 3:
         images = [images]
-    imgs = [np.asarray(im) for im in images]  # type: ignore[union-attr]
-    for i, im in enumerate(imgs):
+    items = list(images)  # type: ignore[arg-type]
+
+    def load(i: int) -> npt.NDArray[np.uint8]:
+        item = items[i]
+        if isinstance(item, (str, os.PathLike)):
+            im = _read_rgb(item)
+        else:
+            im = np.asarray(item)
         if im.ndim != 3 or im.shape[2] != 3 or im.dtype != np.uint8:
             raise ValueError(f"images: photo {i} is not an (H, W, 3) uint8 RGB image")
         if im.shape[0] == 0 or im.shape[1] == 0:
             raise ValueError(f"images: photo {i} is empty ({im.shape[0]}×{im.shape[1]} pixels)")
+        return im
+
+    for i, item in enumerate(items):  # arrays checked before the model loads
+        if not isinstance(item, (str, os.PathLike)):
+            load(i)
     try:
         with warnings.catch_warnings():
             warnings.simplefilter("ignore")  # protobuf deprecation notices on import
@@ -489,7 +507,8 @@ def detect_body_joints(
     with warnings.catch_warnings():
         warnings.simplefilter("ignore")
         with mp_pose.Pose(static_image_mode=True, model_complexity=mc) as model:
-            for im in imgs:
+            for i in _bar(range(len(items)), progress, "body joints", "photo"):
+                im = load(i)
                 res = model.process(np.ascontiguousarray(im))
                 if res.pose_landmarks is None:
                     out.append(np.zeros((0, len(idx), 2)))
@@ -505,4 +524,296 @@ def detect_body_joints(
                     if ok[list(ids)].all():
                         uv[j] = lm[list(ids), :2].mean(axis=0)
                 out.append(uv[None])
+    return out
+
+
+def _read_rgb(path: str | os.PathLike[str]) -> npt.NDArray[np.uint8]:
+    """One image file as ``(H, W, 3)`` uint8 RGB in its stored orientation (no EXIF
+    rotation: the pixel frame COLMAP registers)."""
+    from PIL import Image
+
+    try:
+        with Image.open(path) as im:
+            return np.asarray(im.convert("RGB"))
+    except OSError as exc:
+        raise ValueError(f"photos: cannot read {os.fspath(path)!r} ({exc})") from None
+
+
+def _image_size(path: str | os.PathLike[str]) -> tuple[int, int]:
+    """``(width, height)`` of an image file (its header only)."""
+    from PIL import Image
+
+    try:
+        with Image.open(path) as im:
+            return int(im.size[0]), int(im.size[1])
+    except OSError as exc:
+        raise ValueError(f"photos: cannot read {os.fspath(path)!r} ({exc})") from None
+
+
+def _bar(items: Any, progress: bool, desc: str, unit: str) -> Any:
+    if not progress:
+        return items
+    from tqdm.auto import tqdm  # type: ignore[import-untyped]
+
+    return tqdm(items, desc=desc, unit=unit)
+
+
+# ------------------------------------------------------------------ photos → 3D skeleton
+@dataclass(frozen=True)
+class PhotoBody:
+    """A skeleton reconstructed from photo files (:func:`reconstruct_body_from_photos`).
+
+    Attributes
+    ----------
+    body : the :class:`Body`; its rows are the registered photos, in ``photos`` order
+    cameras : the registered photos' :class:`socialcam.Cameras` with their capture times
+        (seconds from the earliest photo given, registered or not)
+    photos : the registered photos' paths
+    skipped : photo path → why it was left out (not registered by structure from motion)
+    model : the COLMAP model the poses came from
+    joints : ``synth.photos.BODY_JOINTS``, the names of ``body.points``' joint axis
+    """
+
+    body: Body
+    cameras: Any
+    photos: tuple[str, ...]
+    skipped: dict[str, str]
+    model: str
+    joints: tuple[str, ...]
+
+
+def _model_names(model: str) -> list[str]:
+    import pycolmap
+
+    if not os.path.isdir(model):
+        raise ValueError(f"model: {model!r} is not a folder")
+    try:
+        rec = pycolmap.Reconstruction(model)
+    except Exception as exc:  # pycolmap raises its own errors on unreadable models
+        raise ValueError(f"model: cannot read a COLMAP model in {model!r} ({exc})") from None
+    return [img.name for img in rec.images.values()]
+
+
+def _match(photo: str, names: Sequence[str]) -> str | None:
+    """The model image name of a photo: its file name or a trailing part of its path."""
+    posix = os.path.abspath(photo).replace(os.sep, "/")
+    hits = [n for n in names if posix.endswith("/" + n.replace(os.sep, "/").lstrip("/"))]
+    if len(hits) > 1:
+        hits = [n for n in hits if len(n) == max(len(h) for h in hits)]
+    if len(hits) > 1:
+        raise ValueError(f"model: {photo!r} matches several images of the model: {hits}")
+    return hits[0] if hits else None
+
+
+def reconstruct_body_from_photos(
+    photos: Sequence[str | os.PathLike[str]],
+    *,
+    times: Sequence[float | None] | FloatArray | None = None,
+    model: str | os.PathLike[str] | None = None,
+    joints: Sequence[npt.ArrayLike] | None = None,
+    work_dir: str | os.PathLike[str] | None = None,
+    camera_mode: str = "per_image",
+    camera_model: str = "SIMPLE_RADIAL",
+    num_threads: int = -1,
+    progress: bool = False,
+    options: BodyOptions | None = None,
+    **overrides: Any,
+) -> PhotoBody:
+    """The 3D skeleton of the person most photographed in a collection of photo files:
+    capture times (:func:`photo_times`) → camera poses (``sfm.reconstruct_static`` on the
+    photos, or a given COLMAP ``model``) → 2D joints (:func:`detect_body_joints`, or given)
+    undistorted with each photo's lens (:meth:`socialcam.Cameras.undistort_points`) →
+    :func:`reconstruct_body`. Photos the structure from motion does not register are left
+    out and listed in ``PhotoBody.skipped``.
+
+    Parameters
+    ----------
+    photos : image files (JPEG/TIFF with EXIF capture times, or any image with ``times``);
+        distinct file names
+    times : capture times per photo, seconds on any common clock (see :func:`photo_times`);
+        ``None``: from EXIF
+    model : a COLMAP model (folder with ``cameras``/``images``/``points3D``) that registers
+        these photos; an image of the model is a photo when its name is the photo's file
+        name or the end of its path. ``None``: reconstructed from the photos in
+        ``work_dir`` (``sfm.reconstruct_static``, one camera per photo by default)
+    joints : per photo ``(n, 13, 2)`` raw pixels (as in the photo file, before
+        undistortion; NaN = missed) of every person a pose model found, joints in
+        ``synth.photos.BODY_JOINTS`` order; ``None``: :func:`detect_body_joints`
+    work_dir : folder for the structure from motion (needed when ``model`` is ``None``):
+        the photos linked into ``work_dir/images``, the model in ``work_dir/sfm`` (both
+        replaced if they exist; nothing else in ``work_dir`` is touched)
+    camera_mode, camera_model, num_threads : ``sfm.reconstruct_static``'s, when it runs
+    progress : progress bars
+    options, overrides : :class:`BodyOptions`
+
+    Raises
+    ------
+    ValueError
+        Missing or unreadable photos, repeated file names, photos without capture times
+        (naming the file), a photo whose size differs from its camera's in the model,
+        ``joints`` of the wrong count or shape, fewer than 3 registered photos, and
+        everything :func:`reconstruct_body` rejects.
+    """
+    from typing import get_args
+
+    from socialcam._validate import apply_overrides, check_choice
+    from socialcam.camera import Cameras
+    from socialcam.sfm import CameraModel
+    from socialcam.synth.photos import BODY_JOINTS, BODY_PAIRS
+
+    o = apply_overrides(options, BodyOptions, overrides)
+    if isinstance(photos, (str, os.PathLike)) or not isinstance(photos, Sequence):
+        raise ValueError("photos: expected a sequence of image paths")
+    paths = [os.fspath(p) for p in photos]
+    for p in paths:
+        if not os.path.isfile(p):
+            raise ValueError(f"photos: {p!r} is not a file")
+    base = [os.path.basename(p) for p in paths]
+    if len(set(base)) != len(base):
+        dup = sorted({b for b in base if base.count(b) > 1})
+        raise ValueError(f"photos: file names must be distinct, repeated: {dup[:5]}")
+    mode = check_choice(camera_mode, "camera_mode", ("single", "per_folder", "per_image"))
+    lens = check_choice(camera_model, "camera_model", get_args(CameraModel))
+    threads = check_int(num_threads, "num_threads", min=-1)
+    check_bool(progress, "progress")
+    t = photo_times(paths, times)
+    J = len(BODY_JOINTS)
+    given: list[FloatArray] | None = None
+    if joints is not None:
+        if len(joints) != len(paths):
+            raise ValueError(
+                f"joints: expected {len(paths)} arrays (one per photo), got {len(joints)}"
+            )
+        given = [as_float_array(d, f"joints[{i}]", (None, J, 2), allow_nan=True)
+                 for i, d in enumerate(joints)]  # fmt: skip
+    if model is None:
+        from socialcam.sfm import reconstruct_static
+
+        if work_dir is None:
+            raise ValueError("work_dir: needed to reconstruct the photos (or give model=)")
+        import shutil
+
+        work = os.fspath(work_dir)
+        folder = os.path.join(work, "images")
+        if os.path.isdir(folder):  # a previous run's links (only this function's sub-folders)
+            shutil.rmtree(folder)
+        os.makedirs(folder)
+        for p, b in zip(paths, base, strict=True):
+            try:
+                os.symlink(os.path.abspath(p), os.path.join(folder, b))
+            except OSError:  # no symlinks here (e.g. Windows without the privilege)
+                shutil.copyfile(p, os.path.join(folder, b))
+
+        def say(stage: str) -> None:
+            if progress:
+                import sys
+
+                print(f"structure from motion: {stage}", file=sys.stderr)
+
+        out = reconstruct_static(
+            folder,
+            os.path.join(work, "sfm"),
+            camera_mode=mode,  # type: ignore[arg-type]
+            camera_model=lens,  # type: ignore[arg-type]
+            num_threads=threads,
+            overwrite=True,
+            progress=say,
+        )
+        model_dir = os.fspath(out)
+    else:
+        model_dir = os.fspath(model)
+    names = _model_names(model_dir)
+    matched = [_match(p, names) for p in paths]
+    keep = [i for i, n in enumerate(matched) if n is not None]
+    skipped = {paths[i]: "not registered in the model" for i, n in enumerate(matched) if n is None}
+    if len(keep) < 3:
+        raise ValueError(
+            f"photos: {len(keep)} of {len(paths)} photos are registered in the model "
+            f"{model_dir!r} (at least 3 needed)"
+        )
+    cams = Cameras.from_colmap(model_dir, image_names=[matched[i] for i in keep],  # type: ignore[misc]
+                               times=t[keep])  # fmt: skip
+    for f, i in enumerate(keep):
+        cam = cams._colmap[f] if cams._colmap is not None else None
+        w, h = _image_size(paths[i])
+        if cam is not None and (int(cam.width), int(cam.height)) != (w, h):
+            raise ValueError(
+                f"photos: {paths[i]!r} is {w}×{h} pixels but its camera in the model is "
+                f"{int(cam.width)}×{int(cam.height)}"
+            )
+    if given is None:
+        raw = detect_body_joints([paths[i] for i in keep], progress=progress)
+    else:
+        raw = [given[i] for i in keep]
+    dets = []
+    for f, d in enumerate(raw):
+        if len(d):
+            und = cams[f].undistort_points(d.reshape(1, -1, 2))[0]
+            dets.append(und.reshape(d.shape))
+        else:
+            dets.append(np.zeros((0, J, 2)))
+    body = reconstruct_body(dets, cams, BODY_PAIRS, options=o)
+    return PhotoBody(
+        body=body,
+        cameras=cams,
+        photos=tuple(paths[i] for i in keep),
+        skipped=skipped,
+        model=model_dir,
+        joints=tuple(BODY_JOINTS),
+    )
+
+
+def write_body(result: PhotoBody, out_dir: str | os.PathLike[str], *, plots: bool = True) -> str:
+    """Writes ``body.csv`` (one row per registered photo and joint: photo, time in s,
+    joint, x, y, z in metres of the model's frame, and the trajectory alone ``x_smooth`` …;
+    empty where the joint was not reconstructed), ``report.json`` (photos used and
+    skipped, the person found per photo, swaps repaired, each joint's basis size, pixel
+    noise and fusion weight, failures) and, with ``plots``, ``body.png``
+    (:func:`socialcam.viz.plot_body`) into ``out_dir``. Returns the folder."""
+    import csv
+
+    from socialcam.io import write_json
+    from socialcam.synth.photos import BODY_BONES
+
+    if not isinstance(result, PhotoBody):
+        raise ValueError("result: expected a PhotoBody from reconstruct_body_from_photos")
+    out = os.fspath(out_dir)
+    os.makedirs(out, exist_ok=True)
+    b, t = result.body, np.asarray(result.cameras.times)
+
+    def num(v: float) -> str:
+        return "" if not np.isfinite(v) else f"{v:.6f}"
+
+    with open(os.path.join(out, "body.csv"), "w", newline="") as fh:
+        w = csv.writer(fh)
+        w.writerow(["photo", "time_s", "joint", "x", "y", "z", "x_smooth", "y_smooth", "z_smooth"])
+        for f, photo in enumerate(result.photos):
+            for j, name in enumerate(result.joints):
+                w.writerow([os.path.basename(photo), f"{t[f]:.6f}", name,
+                            *map(num, b.points[f, j]), *map(num, b.smooth[f, j])])  # fmt: skip
+    report = {
+        "model": result.model,
+        "photos": [os.path.basename(p) for p in result.photos],
+        "skipped": {os.path.basename(p): why for p, why in result.skipped.items()},
+        "person_found": [bool(c >= 0) for c in b.chosen],
+        "photos_with_person": int((b.chosen >= 0).sum()),
+        "swaps_repaired": int(b.swapped.sum()),
+        "joints": {
+            name: {
+                "k": int(b.k[j]),
+                "noise_px": None if not np.isfinite(b.noise[j]) else round(float(b.noise[j]), 3),
+                "fusion_weight": round(float(b.weight[j]), 4),
+                "failure": b.failures[j],
+            }
+            for j, name in enumerate(result.joints)
+        },
+    }
+    write_json(os.path.join(out, "report.json"), report)
+    if plots:
+        from socialcam.io import save_figure
+        from socialcam.viz import plot_body
+
+        fig = plot_body(result.cameras, b.points, BODY_BONES, names=result.joints,
+                        title=f"{len(result.photos)} photos")  # fmt: skip
+        save_figure(fig, os.path.join(out, "body.png"))
     return out

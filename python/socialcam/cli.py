@@ -119,6 +119,48 @@ def main(argv: Sequence[str] | None = None) -> int:
         help="also write DIR/run.rrd, a rerun recording (needs the 'rerun' extra)",
     )
     rn.add_argument("--json", action="store_true", help="print the whole report as JSON")
+    bd = sub.add_parser(
+        "bodies",
+        help="the 3D skeleton of the person most photographed in a photo collection "
+        "(body.csv, report.json, body.png)",
+    )
+    bd.add_argument("photos", nargs="+", metavar="PHOTO", help="photos of the event")
+    bd.add_argument("--out", required=True, help="output folder")
+    bd.add_argument(
+        "--times",
+        default=None,
+        metavar="CSV",
+        help="capture times: lines 'FILE_NAME,SECONDS' (default: EXIF DateTimeOriginal)",
+    )
+    bd.add_argument(
+        "--model",
+        default=None,
+        metavar="DIR",
+        help="a COLMAP model registering the photos (default: structure from motion in "
+        "OUT/sfm-work)",
+    )
+    bd.add_argument(
+        "--joints",
+        default=None,
+        metavar="NPZ",
+        help="2D joints from your own pose model: one (n, 13, 2) array of raw pixels per "
+        "photo, keyed by file name, joints in synth.photos.BODY_JOINTS order (default: "
+        "MediaPipe Pose)",
+    )
+    bd.add_argument(
+        "--camera-mode",
+        choices=["single", "per_folder", "per_image"],
+        default="per_image",
+        help="cameras to estimate (default: %(default)s)",
+    )
+    bd.add_argument(
+        "--camera-model", default="SIMPLE_RADIAL", help="COLMAP lens model (default: %(default)s)"
+    )
+    bd.add_argument(
+        "--num-threads", type=int, default=-1, help="threads for SfM (default: every core)"
+    )
+    bd.add_argument("--no-plots", action="store_true", help="skip body.png")
+    bd.add_argument("--json", action="store_true", help="print the whole report as JSON")
     vw = sub.add_parser(
         "view",
         help="write a rerun recording (.rrd) of a run folder: map, cameras, video frames, "
@@ -160,6 +202,8 @@ def main(argv: Sequence[str] | None = None) -> int:
         return _poses(parser, args)
     if args.command == "run":
         return _run(parser, args)
+    if args.command == "bodies":
+        return _bodies(args)
     if args.command == "view":
         return _view(args.run_dir, args.out, frames=not args.no_frames)
     if args.command == "render":
@@ -312,6 +356,78 @@ def _poses(parser: argparse.ArgumentParser, args: argparse.Namespace) -> int:
         for w in d["warnings"]:
             print(f"warning: {w}", file=sys.stderr)
     print(f"poses written to {args.out}/poses.csv")
+    return 0
+
+
+def _bodies(args: argparse.Namespace) -> int:
+    import csv
+
+    import numpy as np
+
+    from socialcam.bodies import reconstruct_body_from_photos, write_body
+
+    def fail(msg: str) -> int:
+        print(f"socialcam bodies: error: {msg}", file=sys.stderr)
+        return 2
+
+    names = [Path(p).name for p in args.photos]
+    times = None
+    if args.times is not None:
+        try:
+            with open(args.times, newline="") as fh:
+                rows = [r for r in csv.reader(fh) if r and not r[0].startswith("#")]
+        except OSError as exc:
+            return fail(f"--times: cannot read {args.times!r} ({exc.strerror})")
+        given: dict[str, float] = {}
+        for r in rows:
+            try:
+                given[Path(r[0].strip()).name] = float(r[1])
+            except (IndexError, ValueError):
+                if r is rows[0]:
+                    continue  # a header line
+                return fail(f"--times: expected lines FILE_NAME,SECONDS, got {','.join(r)!r}")
+        missing = [n for n in names if n not in given]
+        if missing:
+            return fail(f"--times: no time for {missing[:5]}")
+        times = [given[n] for n in names]
+    joints = None
+    if args.joints is not None:
+        try:
+            with np.load(args.joints) as z:
+                missing = [n for n in names if n not in z.files]
+                if missing:
+                    return fail(f"--joints: no array for {missing[:5]}")
+                joints = [np.asarray(z[n]) for n in names]
+        except (OSError, ValueError) as exc:
+            return fail(f"--joints: cannot read {args.joints!r} ({exc})")
+    try:
+        res = reconstruct_body_from_photos(
+            args.photos,
+            times=times,
+            model=args.model,
+            joints=joints,
+            work_dir=Path(args.out) / "sfm-work" if args.model is None else None,
+            camera_mode=args.camera_mode,
+            camera_model=args.camera_model,
+            num_threads=args.num_threads,
+            progress=sys.stderr.isatty(),
+        )
+        write_body(res, args.out, plots=not args.no_plots)
+    except (ValueError, RuntimeError) as exc:
+        return fail(str(exc))
+    report = json.loads((Path(args.out) / "report.json").read_text())
+    if args.json:
+        print(json.dumps(report, indent=2))
+    else:
+        done = sum(v["failure"] is None for v in report["joints"].values())
+        print(
+            f"{len(res.photos)} of {len(args.photos)} photos registered, the person in "
+            f"{report['photos_with_person']}, {report['swaps_repaired']} left/right swaps "
+            f"repaired, {done} of {len(report['joints'])} joints reconstructed"
+        )
+        for photo, why in res.skipped.items():
+            print(f"warning: {photo}: {why}", file=sys.stderr)
+    print(f"skeleton written to {args.out}/body.csv")
     return 0
 
 
