@@ -140,7 +140,7 @@ MOCAP = ROOT / "tests" / "data" / "mocap"
 # The clips are captured at 120 Hz unless CLIP_HZ gives their rate (frames per second); a window
 # every `step` frames is at rate / step Hz.
 SOURCE_HZ = 120.0
-CLIP_HZ = {"jacks": 30.0, "fair_jump": 1 / 0.008342, "fair_wave": 1 / 0.008342}
+CLIP_HZ = {"jacks": 30.0, "fair_jump": 1 / 0.008342, "fair_wave": 1 / 0.008342, "rokoko": 100.0}
 K_DCT = 8
 
 
@@ -178,6 +178,15 @@ def fair_clip(name: str) -> tuple[np.ndarray, list[tuple[int, int]]]:
     sk, keep = sc.Skeleton.from_bvh(m)
     pairs = [(j, sk.parents[j]) for j in range(len(sk.names)) if sk.parents[j] != -1]
     return P[:, keep], pairs
+
+
+def rokoko_clip(name: str) -> tuple[np.ndarray, list[tuple[int, int]]]:
+    """The Rokoko dance (ROKOKO_FILE; centimetres, y up): positions (F, J, 3) in metres and
+    (child, parent) pairs of Skeleton.from_bvh's skeleton."""
+    m = load_bvh(MOCAP / name, scale=0.01)
+    sk, keep = sc.Skeleton.from_bvh(m)
+    pairs = [(j, sk.parents[j]) for j in range(len(sk.names)) if sk.parents[j] != -1]
+    return m.positions[:, keep], pairs
 
 
 def c3d_clip(name: str) -> tuple[np.ndarray, list[tuple[int, int]]]:
@@ -514,7 +523,7 @@ def angle_ranges(
 ) -> dict[str, dict[tuple[int, int, int], tuple[float, float]]]:
     """Per BVH clip, the angle priors learned from the other trial's clips (subject 131's hop
     trial and the CMU subject 14 clip: from both walking trials; the FAIR clips: from the first
-    FAIR actor's FAIR_RANGE_CLIPS)."""
+    FAIR actor's FAIR_RANGE_CLIPS; the Rokoko dance: from its frames before ROKOKO_RANGE_FRAMES)."""
     out = {}
     for name, (P, pairs) in clips.items():
         if not name.startswith("131_") and name not in OTHER_SUBJECT:
@@ -522,6 +531,11 @@ def angle_ranges(
         parents = [-1] * P.shape[1]
         for c, pc in pairs:
             parents[c] = pc
+        if name == "rokoko":  # its own frames before every window
+            out[name] = sc.learn_angle_ranges(
+                [P[:ROKOKO_RANGE_FRAMES]], parents, rigid=RIGID, steady=steady
+            )
+            continue
         if name in FAIR_CLIPS:
             fair = [fair_clip(f)[0] for f in FAIR_RANGE_CLIPS]
             out[name] = sc.learn_angle_ranges(fair, parents, rigid=RIGID, steady=steady)
@@ -573,6 +587,7 @@ PARTS = (
     "jacks",
     "fair",
     "final29",
+    "rokoko",
 )
 # Session 8's never-seen cuts: every clip sampled at 40 Hz (every third frame) from
 # frames 10 and 100, 60 frames each (the other parts sample every second frame).
@@ -682,7 +697,18 @@ FAIR_METRES_PER_UNIT = 0.04
 FAIR_CUTS = ((2, 0), (2, 30), (2, 60), (2, 90), (2, 120), (3, 10), (3, 100), (4, 5))
 FAIR_CLIPS = ("fair_jump", "fair_wave")
 FAIR_RANGE_CLIPS = ("fair_dab339.bvh", "fair_zombie400.bvh")
-OTHER_SUBJECT = ("jacks", *FAIR_CLIPS)
+# Session 34's never-seen capture system and person (defined and committed before it was run;
+# no method change since final26): a dance captured with a Rokoko inertial suit
+# (AnimatedDrawings' rokoko/jesse_dance, MIT; y up, centimetres; the bodies bench's ROKOKO_33),
+# the skeleton as Skeleton.from_bvh gives it (28 joints, the hands' first finger joints
+# included), 100 Hz. Windows only after frame 150: at 50 Hz from frames 150, 210 and 270, at
+# 33 Hz from 155 and 215, at 25 Hz from 150. Angle ranges learned on frames 0-149 of the same
+# dance (no other clip of this person or skeleton exists here): judged by the same person's
+# earlier moves, as the FAIR jump is by its actor's other clips.
+ROKOKO_FILE = "rokoko_jesse_dance400.bvh"
+ROKOKO_RANGE_FRAMES = 150
+ROKOKO_CUTS = ((2, 150), (2, 210), (2, 270), (3, 155), (3, 215), (4, 150))
+OTHER_SUBJECT = ("jacks", *FAIR_CLIPS, "rokoko")
 
 
 def load_clips() -> dict[str, tuple[np.ndarray, list[tuple[int, int]]]]:
@@ -702,6 +728,7 @@ def load_clips() -> dict[str, tuple[np.ndarray, list[tuple[int, int]]]]:
         "jacks": bvh_clip("cmu_14_jumping_jacks30.bvh"),
         "fair_jump": fair_clip("fair_jumping300.bvh"),
         "fair_wave": fair_clip("fair_wave300.bvh"),
+        "rokoko": rokoko_clip(ROKOKO_FILE),
     }
 
 
@@ -787,6 +814,7 @@ def all_windows(
     wins += cut("final29", FINAL29_CUTS)
     wins += cut("final29", FINAL29_C3D_CUTS, c3d)
     wins += cut("final29", FINAL29_HOP_CUTS, hop)
+    wins += cut("rokoko", ROKOKO_CUTS, tuple(n for n in clips if n == "rokoko"))
     return wins
 
 
