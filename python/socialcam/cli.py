@@ -43,7 +43,7 @@ def main(argv: Sequence[str] | None = None) -> int:
         default=None,
         metavar="NAME",
         help="run only this stage (repeatable): triangulation, trajectory, articulated, "
-        "social_charges, gaze_field, run (socialcam run on the shipped rendered clips)",
+        "bodies, social_charges, gaze_field, run (socialcam run on the shipped rendered clips)",
     )
     pz = sub.add_parser(
         "poses",
