@@ -21,7 +21,7 @@ import datetime as _dt
 import math
 import os
 from collections.abc import Sequence
-from dataclasses import dataclass
+from dataclasses import dataclass, replace
 from typing import Any
 
 import numpy as np
@@ -572,6 +572,8 @@ class PhotoBody:
     skipped : photo path → why it was left out (not registered by structure from motion)
     model : the COLMAP model the poses came from
     joints : ``synth.photos.BODY_JOINTS``, the names of ``body.points``' joint axis
+    scale : metres per unit of the model (``known_length``), applied to ``body`` and
+        ``cameras``; ``None``: they are in the model's units (metres only if the model is)
     """
 
     body: Body
@@ -580,6 +582,7 @@ class PhotoBody:
     skipped: dict[str, str]
     model: str
     joints: tuple[str, ...]
+    scale: float | None = None
 
 
 def _model_names(model: str) -> list[str]:
@@ -612,6 +615,7 @@ def reconstruct_body_from_photos(
     model: str | os.PathLike[str] | None = None,
     joints: Sequence[npt.ArrayLike] | None = None,
     work_dir: str | os.PathLike[str] | None = None,
+    known_length: tuple[str, str, float] | None = None,
     camera_mode: str = "per_image",
     camera_model: str = "SIMPLE_RADIAL",
     num_threads: int = -1,
@@ -639,6 +643,10 @@ def reconstruct_body_from_photos(
     joints : per photo ``(n, 13, 2)`` raw pixels (as in the photo file, before
         undistortion; NaN = missed) of every person a pose model found, joints in
         ``synth.photos.BODY_JOINTS`` order; ``None``: :func:`detect_body_joints`
+    known_length : ``(joint_a, joint_b, metres)``, names of ``synth.photos.BODY_JOINTS``:
+        the median distance between two joints over the photos, e.g. ``("LeftShoulder",
+        "RightShoulder", 0.37)`` or the hips' width; the skeleton and cameras are scaled to
+        it (structure from motion leaves the scale free). ``None``: the model's units
     work_dir : folder for the structure from motion (needed when ``model`` is ``None``):
         the photos linked into ``work_dir/images``, the model in ``work_dir/sfm`` (both
         replaced if they exist; nothing else in ``work_dir`` is touched)
@@ -676,6 +684,19 @@ def reconstruct_body_from_photos(
     lens = check_choice(camera_model, "camera_model", get_args(CameraModel))
     threads = check_int(num_threads, "num_threads", min=-1)
     check_bool(progress, "progress")
+    pair: tuple[int, int, float] | None = None
+    if known_length is not None:
+        try:
+            a_, b_, metres = known_length
+        except (TypeError, ValueError):
+            raise ValueError("known_length: expected (joint_a, joint_b, metres)") from None
+        for n in (a_, b_):
+            if n not in BODY_JOINTS:
+                raise ValueError(f"known_length: {n!r} is not one of {', '.join(BODY_JOINTS)}")
+        if a_ == b_:
+            raise ValueError("known_length: two different joints needed")
+        L = check_float(metres, "known_length", min=0.0, min_exclusive=True)
+        pair = (BODY_JOINTS.index(a_), BODY_JOINTS.index(b_), L)
     t = photo_times(paths, times)
     J = len(BODY_JOINTS)
     given: list[FloatArray] | None = None
@@ -753,6 +774,19 @@ def reconstruct_body_from_photos(
         else:
             dets.append(np.zeros((0, J, 2)))
     body = reconstruct_body(dets, cams, BODY_PAIRS, options=o)
+    scale = None
+    if pair is not None:  # the whole reconstruction is equivariant to the model's scale
+        ia, ib, L = pair
+        d = np.linalg.norm(body.points[:, ia] - body.points[:, ib], axis=-1)
+        if not np.isfinite(d).any() or np.nanmedian(d) <= 0:
+            raise ValueError(
+                f"known_length: {known_length[0]!r} and {known_length[1]!r} are never both "  # type: ignore[index]
+                "reconstructed in one photo"
+            )
+        scale = float(L / np.nanmedian(d))
+        body = replace(body, points=readonly(body.points * scale),
+                       smooth=readonly(body.smooth * scale))  # fmt: skip
+        cams = Cameras(cams.K, cams.R, cams.C * scale, cams.times)
     return PhotoBody(
         body=body,
         cameras=cams,
@@ -760,12 +794,14 @@ def reconstruct_body_from_photos(
         skipped=skipped,
         model=model_dir,
         joints=tuple(BODY_JOINTS),
+        scale=scale,
     )
 
 
 def write_body(result: PhotoBody, out_dir: str | os.PathLike[str], *, plots: bool = True) -> str:
     """Writes ``body.csv`` (one row per registered photo and joint: photo, time in s,
-    joint, x, y, z in metres of the model's frame, and the trajectory alone ``x_smooth`` …;
+    joint, x, y, z in the model's frame (metres with ``known_length``, otherwise the
+    model's units), and the trajectory alone ``x_smooth`` …;
     empty where the joint was not reconstructed), ``report.json`` (photos used and
     skipped, the person found per photo, swaps repaired, each joint's basis size, pixel
     noise and fusion weight, failures) and, with ``plots``, ``body.png``
@@ -793,6 +829,8 @@ def write_body(result: PhotoBody, out_dir: str | os.PathLike[str], *, plots: boo
                             *map(num, b.points[f, j]), *map(num, b.smooth[f, j])])  # fmt: skip
     report = {
         "model": result.model,
+        "units": "metres" if result.scale is not None else "model units",
+        "metres_per_model_unit": result.scale,
         "photos": [os.path.basename(p) for p in result.photos],
         "skipped": {os.path.basename(p): why for p, why in result.skipped.items()},
         "person_found": [bool(c >= 0) for c in b.chosen],

@@ -148,6 +148,14 @@ def main(argv: Sequence[str] | None = None) -> int:
         "MediaPipe Pose)",
     )
     bd.add_argument(
+        "--known-length",
+        nargs=3,
+        default=None,
+        metavar=("JOINT_A", "JOINT_B", "METRES"),
+        help="the median distance between two joints (e.g. LeftShoulder RightShoulder 0.37): "
+        "the output in metres (default: the model's units; SfM leaves the scale free)",
+    )
+    bd.add_argument(
         "--camera-mode",
         choices=["single", "per_folder", "per_image"],
         default="per_image",
@@ -400,9 +408,17 @@ def _bodies(args: argparse.Namespace) -> int:
                 joints = [np.asarray(z[n]) for n in names]
         except (OSError, ValueError) as exc:
             return fail(f"--joints: cannot read {args.joints!r} ({exc})")
+    known = None
+    if args.known_length is not None:
+        a, b, metres = args.known_length
+        try:
+            known = (a, b, float(metres))
+        except ValueError:
+            return fail(f"--known-length: METRES must be a number, got {metres!r}")
     try:
         res = reconstruct_body_from_photos(
             args.photos,
+            known_length=known,
             times=times,
             model=args.model,
             joints=joints,
@@ -423,7 +439,8 @@ def _bodies(args: argparse.Namespace) -> int:
         print(
             f"{len(res.photos)} of {len(args.photos)} photos registered, the person in "
             f"{report['photos_with_person']}, {report['swaps_repaired']} left/right swaps "
-            f"repaired, {done} of {len(report['joints'])} joints reconstructed"
+            f"repaired, {done} of {len(report['joints'])} joints reconstructed, in "
+            f"{report['units']}"
         )
         for photo, why in res.skipped.items():
             print(f"warning: {photo}: {why}", file=sys.stderr)
