@@ -168,9 +168,20 @@ def test_detector_and_sfm_paths(tmp_path, clips, monkeypatch):
         return [at[Path(p).name] for p in images]
 
     def fake_sfm(image_dir, out_dir, **kw):
-        seen["sfm"] = sorted(p.name for p in Path(image_dir).iterdir())
+        """Checks the links and writes the model as the linked names, one camera folder."""
+        seen["sfm"] = sorted(p.name for p in Path(image_dir).rglob("*.png"))
         seen["sfm_kw"] = kw
-        return model
+        subs = sorted(p.name for p in Path(image_dir).iterdir())
+        seen["subs"] = subs
+        linked = Path(out_dir) / "model"
+        linked.mkdir(parents=True)
+        for f in ("cameras.txt", "points3D.txt"):
+            (linked / f).write_text((model / f).read_text())
+        lines = (model / "images.txt").read_text().splitlines(keepends=True)
+        (linked / "images.txt").write_text("".join(
+            " ".join([*ln.split(" ")[:-1], f"{subs[0]}/{ln.split(' ')[-1]}"]) if ln.strip() else ln
+            for ln in lines))  # fmt: skip
+        return linked
 
     monkeypatch.setattr(bodies, "detect_body_joints", fake_detect)
     monkeypatch.setattr(socialcam.sfm, "reconstruct_static", fake_sfm)
@@ -179,7 +190,7 @@ def test_detector_and_sfm_paths(tmp_path, clips, monkeypatch):
     res = reconstruct_body_from_photos(paths, times=times, work_dir=tmp_path / "work")
     assert (tmp_path / "work" / "mine.txt").read_text() == "the user's"
     assert seen["sfm_kw"]["overwrite"] is True
-    assert seen["sfm"] == sorted(names)
+    assert seen["sfm"] == sorted(names) and seen["subs"] == ["camera000"]
     assert seen["sfm_kw"]["camera_mode"] == "per_image"
     assert seen["detect"] == [Path(p).name for p in res.photos]
     direct = reconstruct_body_from_photos(paths, times=times, model=model, joints=raw)
@@ -269,3 +280,36 @@ def test_known_length_gives_metres(tmp_path, clips):
             "--times", str(tmp_path / "times.csv"), "--joints", str(tmp_path / "joints.npz")]  # fmt: skip
     assert main([*base, "--known-length", "LeftShoulder", "RightShoulder", "wide"]) == 2
     assert main([*base, "--known-length", "LeftShoulder", "RightShoulder", str(width)]) == 0
+
+
+def test_per_folder_links_one_folder_per_photographer(tmp_path, monkeypatch):
+    """``camera_mode="per_folder"``: the photos of each folder (e.g. one per photographer)
+    are linked into a sub-folder of their own, so structure from motion gives each folder
+    one camera."""
+    import socialcam.sfm
+
+    photos = []
+    for who, n in (("anna", 2), ("ben", 3)):
+        (tmp_path / who).mkdir()
+        for i in range(n):
+            Image.new("RGB", (32, 24)).save(tmp_path / who / f"{who}{i}.png")
+            photos.append(tmp_path / who / f"{who}{i}.png")
+    seen = {}
+
+    class Stop(Exception):
+        pass
+
+    def fake_sfm(image_dir, out_dir, **kw):
+        seen.update(kw)
+        seen["layout"] = sorted(
+            str(p.relative_to(image_dir)) for p in Path(image_dir).rglob("*.png")
+        )
+        raise Stop
+
+    monkeypatch.setattr(socialcam.sfm, "reconstruct_static", fake_sfm)
+    with pytest.raises(Stop):
+        reconstruct_body_from_photos(photos, times=np.arange(5.0), work_dir=tmp_path / "w",
+                                     camera_mode="per_folder")  # fmt: skip
+    assert seen["camera_mode"] == "per_folder"
+    assert seen["layout"] == ["camera000/anna0.png", "camera000/anna1.png", "camera001/ben0.png",
+                              "camera001/ben1.png", "camera001/ben2.png"]  # fmt: skip

@@ -651,6 +651,7 @@ def reconstruct_body_from_photos(
         the photos linked into ``work_dir/images``, the model in ``work_dir/sfm`` (both
         replaced if they exist; nothing else in ``work_dir`` is touched)
     camera_mode, camera_model, num_threads : ``sfm.reconstruct_static``'s, when it runs
+        (``"per_folder"``: one camera per folder the photos are in, e.g. per photographer)
     progress : progress bars
     options, overrides : :class:`BodyOptions`
 
@@ -707,6 +708,7 @@ def reconstruct_body_from_photos(
             )
         given = [as_float_array(d, f"joints[{i}]", (None, J, 2), allow_nan=True)
                  for i, d in enumerate(joints)]  # fmt: skip
+    linked: dict[str, str] = {}  # photo → its name in the model this function makes
     if model is None:
         from socialcam.sfm import reconstruct_static
 
@@ -718,12 +720,18 @@ def reconstruct_body_from_photos(
         folder = os.path.join(work, "images")
         if os.path.isdir(folder):  # a previous run's links (only this function's sub-folders)
             shutil.rmtree(folder)
-        os.makedirs(folder)
+        # one sub-folder per folder the photos are in (``per_folder``: one camera each)
+        dirs = {d: f"camera{k:03d}" for k, d in enumerate(dict.fromkeys(
+            os.path.dirname(os.path.abspath(p)) for p in paths))}  # fmt: skip
+        for sub in dirs.values():
+            os.makedirs(os.path.join(folder, sub))
         for p, b in zip(paths, base, strict=True):
+            link = f"{dirs[os.path.dirname(os.path.abspath(p))]}/{b}"
+            linked[p] = link
             try:
-                os.symlink(os.path.abspath(p), os.path.join(folder, b))
+                os.symlink(os.path.abspath(p), os.path.join(folder, link))
             except OSError:  # no symlinks here (e.g. Windows without the privilege)
-                shutil.copyfile(p, os.path.join(folder, b))
+                shutil.copyfile(p, os.path.join(folder, link))
 
         def say(stage: str) -> None:
             if progress:
@@ -744,7 +752,11 @@ def reconstruct_body_from_photos(
     else:
         model_dir = os.fspath(model)
     names = _model_names(model_dir)
-    matched = [_match(p, names) for p in paths]
+    if linked:
+        known = set(names)
+        matched = [linked[p] if linked[p] in known else None for p in paths]
+    else:
+        matched = [_match(p, names) for p in paths]
     keep = [i for i, n in enumerate(matched) if n is not None]
     skipped = {paths[i]: "not registered in the model" for i, n in enumerate(matched) if n is None}
     if len(keep) < 3:
