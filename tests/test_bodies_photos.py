@@ -313,3 +313,69 @@ def test_per_folder_links_one_folder_per_photographer(tmp_path, monkeypatch):
     assert seen["camera_mode"] == "per_folder"
     assert seen["layout"] == ["camera000/anna0.png", "camera000/anna1.png", "camera001/ben0.png",
                               "camera001/ben1.png", "camera001/ben2.png"]  # fmt: skip
+
+
+def test_real_structure_from_motion_on_real_photos(tmp_path, data_dir, clips):
+    """The whole chain with ``sfm.reconstruct_static`` running for real on six real photos
+    (the Sceaux castle) through the links it makes: a person standing before the castle (a
+    CMU pose, scaled to the scene), its joints projected into the photos through a first
+    reconstruction's cameras and lens (+ 0.5 px noise). The chain's own reconstruction
+    (another run, its own frame and scale) must put the skeleton where those pixels say:
+    its reprojection through its cameras and lens matches them (measured 0.41 px median; 11
+    px with each photo paired with the next photo's camera), and its shape matches the
+    person's up to a similarity (0.8 % of its height)."""
+    import pycolmap
+
+    from socialcam import align_similarity
+    from socialcam.sfm import reconstruct_static
+
+    photos = sorted((data_dir / "sceaux_castle_small").glob("*.jpg"))
+    made = reconstruct_static(
+        data_dir / "sceaux_castle_small", tmp_path / "first", max_image_size=800
+    )
+    first = pycolmap.Reconstruction(str(made))
+    by_name = {img.name: img for img in first.images.values()}
+    X = np.array([p.xyz for p in first.points3D.values()])
+    C = np.array([by_name[p.name].projection_center() for p in photos])
+    # the person: stands at the points' median, 1/4 of the cameras' distance to it tall
+    centre = np.median(X, axis=0)
+    pose = photo_collection(clips[0].positions, clips[0].names, clips[0].fps, seed=0).points[0]
+    pose = pose - pose.mean(axis=0)
+    size = 0.25 * np.median(np.linalg.norm(C - centre, axis=1)) / np.ptp(pose[:, 2])
+    person = centre + size * pose
+    rng = np.random.default_rng(0)
+    raw = []
+    for p in photos:
+        img = by_name[p.name]
+        cam = first.cameras[img.camera_id]
+        pose_ = img.cam_from_world() if callable(img.cam_from_world) else img.cam_from_world
+        xc = np.array([pose_ * x for x in person])
+        uv = np.asarray(cam.img_from_cam(xc), float) - 0.5 + rng.normal(0, 0.5, (len(person), 2))
+        raw.append(uv[None])
+    import socialcam.sfm
+
+    real = socialcam.sfm.reconstruct_static
+
+    def smaller(image_dir, out_dir, **kw):  # the photos at 800 px, as above
+        return real(image_dir, out_dir, max_image_size=800, **kw)
+
+    with pytest.MonkeyPatch.context() as mp:
+        mp.setattr(socialcam.sfm, "reconstruct_static", smaller)
+        res = reconstruct_body_from_photos(photos, times=np.arange(6.0), joints=raw,
+                                           work_dir=tmp_path / "work", camera_mode="single")  # fmt: skip
+    assert len(res.photos) == 6 and not res.skipped
+    # reprojected through the chain's own cameras and lens: on the given raw pixels
+    model = pycolmap.Reconstruction(res.model)
+    second = {img.name: img for img in model.images.values()}
+    resid = []
+    for f, p in enumerate(res.photos):
+        img = second[f"camera000/{Path(p).name}"]
+        cam = model.cameras[img.camera_id]
+        pose_ = img.cam_from_world() if callable(img.cam_from_world) else img.cam_from_world
+        xc = np.array([pose_ * x for x in res.body.points[f]])
+        uv = np.asarray(cam.img_from_cam(xc), float) - 0.5
+        resid.append(np.linalg.norm(uv - raw[photos.index(Path(p))][0], axis=1))
+    assert np.median(resid) < 1.5, np.median(resid)
+    s, R, t = align_similarity(res.body.points[0], person)
+    shape = np.linalg.norm(s * res.body.points[0] @ R.T + t - person, axis=1)
+    assert np.median(shape) < 0.03 * np.ptp(person[:, 2]), (np.median(shape), np.ptp(person[:, 2]))

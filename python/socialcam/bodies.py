@@ -273,6 +273,8 @@ def reconstruct_body(
         raise ValueError(f"detections: expected {F} arrays (one per photo), got {len(detections)}")
     dets = [as_float_array(d, f"detections[{f}]", (None, None, 2), allow_nan=True)
             for f, d in enumerate(detections)]  # fmt: skip
+    if not any(len(d) for d in dets):
+        raise ValueError("detections: no person was detected in any photo")
     J = next((d.shape[1] for d in dets if len(d)), 0)
     if J == 0 or any(len(d) and d.shape[1] != J for d in dets):
         raise ValueError("detections: every detection needs the same number of joints (≥ 1)")
