@@ -213,6 +213,8 @@ def test_bad_input(tmp_path, clips):
         run(paths, times=times, model=model, joints=raw[:-1])
     with pytest.raises(ValueError, match=r"joints\[0\]"):
         run(paths, times=times, model=model, joints=[r[..., :1] for r in raw])
+    with pytest.raises(ValueError, match="no person was detected in any photo"):
+        run(paths, times=times, model=model, joints=[r[:0] for r in raw])
     with pytest.raises(ValueError, match="work_dir"):
         run(paths, times=times, joints=raw)
     with pytest.raises(ValueError, match="camera_mode"):
