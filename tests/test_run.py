@@ -200,6 +200,16 @@ def test_cli_run(first, scene, tmp_path, capsys):
     text = capsys.readouterr()
     assert "cached" in text.out and "results written" in text.out
     assert "wearer0: gaze along the camera's optical axis" in text.err
+    # --faces: then the faces of everyone in view; this scene has no faces on the heads:
+    # nobody reconstructed, said so, no error
+    assert main([*args, "--faces"]) == 0
+    text = capsys.readouterr()
+    assert "0 wearers and 0 people without a camera reconstructed" in text.out
+    report = json.loads((out / "faces.json").read_text())
+    assert report["people"] == [] and report["instants"] > 0
+    assert (
+        out / "faces.csv"
+    ).read_text().strip() == "person,name,wearer,time,px,py,pz,vx,vy,vz,h,views"
 
 
 def test_cli_bad_input(scene, tmp_path, capsys):

@@ -118,6 +118,12 @@ def main(argv: Sequence[str] | None = None) -> int:
         action="store_true",
         help="also write DIR/run.rrd, a rerun recording (needs the 'rerun' extra)",
     )
+    rn.add_argument(
+        "--faces",
+        action="store_true",
+        help="then the faces of everyone in view (as socialcam faces RUN_DIR; needs metric "
+        "poses: --eye-height or --known-distance)",
+    )
     rn.add_argument("--json", action="store_true", help="print the whole report as JSON")
     bd = sub.add_parser(
         "bodies",
@@ -597,6 +603,11 @@ def _run(parser: argparse.ArgumentParser, args: argparse.Namespace) -> int:
         for w in rep["warnings"]:
             print(f"warning: {w}", file=sys.stderr)
     print(f"results written to {args.out}")
+    if args.faces:
+        code = _faces(argparse.Namespace(run_dir=args.out, landmarks="mtcnn", min_face=12.0,
+                                         json=False))  # fmt: skip
+        if code:
+            return code
     return _view(args.out, None, frames=True) if args.rerun else 0
 
 
