@@ -1,7 +1,7 @@
 """Faces of everyone in view through the user's chain (issue 11: "3D landmark error ≤ 3 cm
 with poses from SfM"): a rendered conversation circle (4 wearers + 2 people without a
 camera, 3 s at 10 fps, 1280×960, no audio: manual zero offsets) → ``socialcam run`` (poses
-by SfM, metric scale from the wearers' mean camera height, as a user would measure it) →
+by SfM on one thread, repeatable; metric scale from the wearers' mean camera height, as a user would measure it) →
 ``pipeline.faces`` (MTCNN on every posed frame, undistorted with the estimated lens,
 ``reconstruct_faces``) → scored against the renderer's truth
 (``synth.evaluate.faces_vs_truth``, the SfM world mapped onto the truth by the similarity of
@@ -46,8 +46,17 @@ def evaluate(out: Path, seed: int) -> None:
     folder = out / f"run{seed}"
     with warnings.catch_warnings():
         warnings.simplefilter("ignore", RunWarning)  # no calibration segment: optical axis
-        res = run(scene.videos, folder, sync=dict.fromkeys(names, 0.0), eye_height=eye,
-                  overwrite=True, progress=False, plots=False, overlays=False)  # fmt: skip
+        res = run(
+            scene.videos,
+            folder,
+            sync=dict.fromkeys(names, 0.0),
+            eye_height=eye,
+            overwrite=True,
+            progress=False,
+            plots=False,
+            overlays=False,
+            num_threads=1,
+        )  # fmt: skip  (one thread: the same poses on every run)
     vf, report = faces(folder, progress=False)
     rec = VideoReconstruction.load(folder / "cache" / "sfm")
     used = list(vf.names)
