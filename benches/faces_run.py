@@ -57,7 +57,12 @@ def evaluate(out: Path, seed: int) -> None:
             overlays=False,
             num_threads=1,
         )  # fmt: skip  (one thread: the same poses on every run)
-    vf, report = faces(folder, progress=False)
+    try:
+        vf, report = faces(folder, progress=False)
+    except ValueError as exc:  # e.g. poses without a metric scale: said, next seed
+        print(f"{seed} posed {res.report['poses']['registered_fraction']:.3f}: not scored ({exc}; "
+              f"run warnings: {res.report['poses']['warnings']})", flush=True)  # fmt: skip
+        return
     rec = VideoReconstruction.load(folder / "cache" / "sfm")
     used = list(vf.names)
     truth_cams = {n: tr.cameras(names.index(n)) for n in used}
