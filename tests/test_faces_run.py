@@ -109,6 +109,14 @@ def test_faces_of_a_run_folder(tmp_path, scene, found, capsys):
     assert report["wearers_found"] == len(wearers) >= 3
     dis = [p["ego_exo_disagreement_deg_median"] for p in wearers if "ego_exo_instants" in p]
     assert len(dis) >= 3 and max(dis) < 10, dis
+    png = run / "faces_top.png"
+    assert png.read_bytes()[:8] == b"\x89PNG\r\n\x1a\n" and png.stat().st_size > 10_000
+    from socialcam.viz import plot_faces_top
+
+    with pytest.raises(ValueError, match="faces: expected a Faces3D"):
+        plot_faces_top(object(), ["a"])
+    with pytest.raises(ValueError, match="every"):
+        plot_faces_top(f3, found.names, every=0)
     # not a run; a run without metric poses
     assert main(["faces", str(tmp_path / "nothing")]) == 2
     unscaled = _run_folder(tmp_path / "u", scene, scale=float("nan"))

@@ -191,6 +191,7 @@ def main(argv: Sequence[str] | None = None) -> int:
     fc.add_argument(
         "--min-face", type=float, default=12.0, help="smallest face, pixels (default: 12)"
     )
+    fc.add_argument("--no-plots", action="store_true", help="skip faces_top.png")
     fc.add_argument("--json", action="store_true", help="print the whole report as JSON")
     vw = sub.add_parser(
         "view",
@@ -400,6 +401,7 @@ def _faces(args: argparse.Namespace) -> int:
             args.run_dir,
             landmarks=args.landmarks,
             min_face=args.min_face,
+            plots=not getattr(args, "no_plots", False),
             progress=sys.stderr.isatty(),
         )
     except ValueError as exc:
@@ -605,7 +607,7 @@ def _run(parser: argparse.ArgumentParser, args: argparse.Namespace) -> int:
     print(f"results written to {args.out}")
     if args.faces:
         code = _faces(argparse.Namespace(run_dir=args.out, landmarks="mtcnn", min_face=12.0,
-                                         json=False))  # fmt: skip
+                                         json=False, no_plots=args.no_plots))  # fmt: skip
         if code:
             return code
     return _view(args.out, None, frames=True) if args.rerun else 0

@@ -2155,6 +2155,7 @@ def faces(
     *,
     landmarks: str = "mtcnn",
     min_face: float = 12.0,
+    plots: bool = True,
     progress: bool = True,
     face_options: Any = None,
     **overrides: Any,
@@ -2164,8 +2165,9 @@ def faces(
     others) against its ego gaze (``gaze.csv``, from its head camera): how far they
     disagree (:func:`socialcam.faces.fuse_ego_exo`; this also checks the ego calibration).
 
-    Writes ``faces.csv`` (:func:`faces_csv`) and ``faces.json`` (people found, instants per
-    person, detections, disagreement per wearer in degrees) into ``run_dir``. Returns the
+    Writes ``faces.csv`` (:func:`faces_csv`), ``faces.json`` (people found, instants per
+    person, detections, disagreement per wearer in degrees) and, with ``plots``,
+    ``faces_top.png`` (:func:`socialcam.viz.plot_faces_top`) into ``run_dir``. Returns the
     :class:`VideoFaces` and that report.
 
     Raises
@@ -2177,6 +2179,7 @@ def faces(
     """
     from socialcam.faces import fuse_ego_exo
 
+    check_bool(plots, "plots")
     out = Path(run_dir)
     report_p = out / "report.json"
     if not report_p.is_file() or not (out / "cache" / "sfm").is_dir():
@@ -2248,4 +2251,9 @@ def faces(
         "seconds": time.perf_counter() - t0,
     }
     write_json(out / "faces.json", report)
+    if plots:
+        from socialcam.io import save_figure
+        from socialcam.viz import plot_faces_top
+
+        save_figure(plot_faces_top(f3, names, rec.cameras), out / "faces_top.png")
     return found, report

@@ -228,6 +228,57 @@ def plot_charges_top(
     return fig
 
 
+def plot_faces_top(
+    faces: Any,
+    names: Any,
+    cameras: dict[str, Cameras] | None = None,
+    *,
+    every: int = 5,
+    arrow: float = 0.5,
+    title: str = "faces of everyone in view, top view",
+) -> Any:
+    """Top view (x, y in metres) of the faces of :func:`socialcam.pipeline.faces_in_videos`
+    (or :func:`socialcam.faces.reconstruct_faces`): each person's eye midpoint over time (a
+    line, wearers solid, people without a camera dashed) with its gaze every ``every``
+    instants (arrows ``arrow`` metres long), and the wearers' camera paths (grey) when
+    ``cameras`` (person → Cameras) is given. ``names``: the wearers' names in camera order
+    (person ``v`` < ``len(names)`` is ``names[v]``). Returns the figure."""
+    from socialcam._validate import check_float, check_int
+
+    every_ = check_int(every, "every", min=1)
+    length = check_float(arrow, "arrow", min=0.0, min_exclusive=True)
+    for field in ("person", "wearer", "p", "v"):
+        if not hasattr(faces, field):
+            raise ValueError(f"faces: expected a Faces3D (no {field!r})")
+    names_ = [str(n) for n in names]
+    V = len(names_)
+    plt = _plt()
+    fig, ax = plt.subplots(figsize=(7, 6))
+    for cam in (cameras or {}).values():
+        if len(cam):
+            ax.plot(cam.C[:, 0], cam.C[:, 1], c="0.75", lw=1)
+    cmap = plt.get_cmap("tab10")
+    for j, pid in enumerate(np.asarray(faces.person)):
+        ok = np.flatnonzero(np.isfinite(faces.v[:, j]).all(axis=1))
+        if not len(ok):
+            continue
+        col = cmap(j % 10)
+        label = names_[pid] if pid < V else f"person{pid - V} (no camera)"
+        P, G = faces.p[ok, j], faces.v[ok, j]
+        ax.plot(P[:, 0], P[:, 1], "-" if faces.wearer[j] else "--", c=col, lw=1.5, label=label)
+        sel = slice(None, None, every_)
+        ax.quiver(P[sel, 0], P[sel, 1], length * G[sel, 0], length * G[sel, 1], color=col,
+                  angles="xy", scale_units="xy", scale=1.0, width=0.004)  # fmt: skip
+    ax.set_aspect("equal", adjustable="datalim")
+    ax.set_xlabel("x [m]")
+    ax.set_ylabel("y [m]")
+    ax.set_title(title)
+    if ax.get_legend_handles_labels()[0]:
+        ax.legend(loc="upper right", fontsize=7)
+    fig.tight_layout()
+    return fig
+
+
 def plot_charges_over_time(
     times: npt.ArrayLike,
     charges: Any,
