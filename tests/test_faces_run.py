@@ -124,3 +124,19 @@ def test_faces_of_a_run_folder(tmp_path, scene, found, capsys):
         faces(unscaled)
     with pytest.raises(ValueError, match="at least two posed wearers"):
         faces_in_videos(scene.videos[:1], {scene.truth.names[0]: scene.truth.cameras(0)})
+
+
+def test_a_scene_without_faces_is_said_not_an_error(tmp_path, capsys):
+    """Heads without faces on them (the renderer's default): every posed frame searched,
+    nobody reconstructed, the command says so and succeeds, faces.csv holds its header."""
+    plain = render_scene(tmp_path / "plain", n_wearers=2, duration=0.5, fps=10.0,
+                         size=(320, 240), seed=2, audio=False, calibration=False,
+                         progress=False)  # fmt: skip
+    run = _run_folder(tmp_path, plain)
+    assert main(["faces", str(run), "--no-plots"]) == 0
+    assert "0 wearers and 0 people without a camera reconstructed" in capsys.readouterr().out
+    report = json.loads((run / "faces.json").read_text())
+    assert report["people"] == [] and report["instants"] == 5
+    header = "person,name,wearer,time,px,py,pz,vx,vy,vz,h,views"
+    assert (run / "faces.csv").read_text().strip() == header
+    assert not (run / "faces_top.png").exists()

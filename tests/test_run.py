@@ -189,7 +189,7 @@ def test_out_dir_of_another_run_is_refused(first, scene, tmp_path):
     assert (out / "poses.csv").read_bytes() == before
 
 
-def test_cli_run(first, scene, tmp_path, capsys):
+def test_cli_run(first, scene, tmp_path, capsys, monkeypatch):
     _res, out = first
     cfg = tmp_path / "run.toml"
     h = _eye_height(scene.truth)
@@ -200,16 +200,22 @@ def test_cli_run(first, scene, tmp_path, capsys):
     text = capsys.readouterr()
     assert "cached" in text.out and "results written" in text.out
     assert "wearer0: gaze along the camera's optical axis" in text.err
-    # --faces: then the faces of everyone in view; this scene has no faces on the heads:
-    # nobody reconstructed, said so, no error
-    assert main([*args, "--faces"]) == 0
-    text = capsys.readouterr()
-    assert "0 wearers and 0 people without a camera reconstructed" in text.out
-    report = json.loads((out / "faces.json").read_text())
-    assert report["people"] == [] and report["instants"] > 0
-    assert (
-        out / "faces.csv"
-    ).read_text().strip() == "person,name,wearer,time,px,py,pz,vx,vy,vz,h,views"
+    # --faces: then `socialcam faces` on the run folder (the faces themselves are tested in
+    # test_faces_run.py, a scene without faces included)
+    import socialcam.pipeline
+
+    seen = []
+
+    def fake_faces(run_dir, **kw):
+        seen.append((str(run_dir), kw))
+        return None, {"detections": {}, "instants": 0, "wearers_found": 0, "others_found": 0,
+                      "people": []}  # fmt: skip
+
+    monkeypatch.setattr(socialcam.pipeline, "faces", fake_faces)
+    assert main([*args, "--faces", "--no-plots"]) == 0
+    assert seen == [(str(out), {"landmarks": "mtcnn", "min_face": 12.0, "plots": False,
+                                "progress": False})]  # fmt: skip
+    assert "faces written" in capsys.readouterr().out
 
 
 def test_cli_bad_input(scene, tmp_path, capsys):
