@@ -8,6 +8,7 @@ from __future__ import annotations
 
 import csv
 import json
+import shutil
 from pathlib import Path
 
 import numpy as np
@@ -171,8 +172,10 @@ def test_detector_and_sfm_paths(tmp_path, clips, monkeypatch):
         """Checks the links and writes the model as the linked names, one camera folder."""
         seen["sfm"] = sorted(p.name for p in Path(image_dir).rglob("*.png"))
         seen["sfm_kw"] = kw
-        subs = sorted(p.name for p in Path(image_dir).iterdir())
+        subs = sorted(p.name for p in Path(image_dir).iterdir() if p.is_dir())
         seen["subs"] = subs
+        if Path(out_dir).exists():  # overwrite=True, as the real one
+            shutil.rmtree(out_dir)
         linked = Path(out_dir) / "model"
         linked.mkdir(parents=True)
         for f in ("cameras.txt", "points3D.txt"):
@@ -190,6 +193,14 @@ def test_detector_and_sfm_paths(tmp_path, clips, monkeypatch):
     res = reconstruct_body_from_photos(paths, times=times, work_dir=tmp_path / "work")
     assert (tmp_path / "work" / "mine.txt").read_text() == "the user's"
     assert seen["sfm_kw"]["overwrite"] is True
+    # a rerun replaces what the first made; a user's own folder of that name is refused
+    again = reconstruct_body_from_photos(paths, times=times, work_dir=tmp_path / "work")
+    np.testing.assert_array_equal(again.body.points, res.body.points)
+    (tmp_path / "mine" / "images").mkdir(parents=True)
+    (tmp_path / "mine" / "images" / "photo.jpg").write_text("a user's photo")
+    with pytest.raises(ValueError, match="was not made by reconstruct_body_from_photos"):
+        reconstruct_body_from_photos(paths, times=times, work_dir=tmp_path / "mine")
+    assert (tmp_path / "mine" / "images" / "photo.jpg").read_text() == "a user's photo"
     assert seen["sfm"] == sorted(names) and seen["subs"] == ["camera000"]
     assert seen["sfm_kw"]["camera_mode"] == "per_image"
     assert seen["detect"] == [Path(p).name for p in res.photos]

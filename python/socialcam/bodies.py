@@ -552,6 +552,11 @@ def _image_size(path: str | os.PathLike[str]) -> tuple[int, int]:
         raise ValueError(f"photos: cannot read {os.fspath(path)!r} ({exc})") from None
 
 
+#: the file that marks a ``work_dir`` sub-folder as made (and replaceable) by
+#: :func:`reconstruct_body_from_photos`
+_MADE_HERE = ".socialcam-made-this"
+
+
 def _bar(items: Any, progress: bool, desc: str, unit: str) -> Any:
     if not progress:
         return items
@@ -650,8 +655,9 @@ def reconstruct_body_from_photos(
         "RightShoulder", 0.37)`` or the hips' width; the skeleton and cameras are scaled to
         it (structure from motion leaves the scale free). ``None``: the model's units
     work_dir : folder for the structure from motion (needed when ``model`` is ``None``):
-        the photos linked into ``work_dir/images``, the model in ``work_dir/sfm`` (both
-        replaced if they exist; nothing else in ``work_dir`` is touched)
+        the photos linked into ``work_dir/images``, the model in ``work_dir/sfm`` (replaced on
+        a rerun; a folder of those names that this function did not make is an error, never
+        deleted; nothing else in ``work_dir`` is touched)
     camera_mode, camera_model, num_threads : ``sfm.reconstruct_static``'s, when it runs
         (``"per_folder"``: one camera per folder the photos are in, e.g. per photographer)
     progress : progress bars
@@ -720,13 +726,22 @@ def reconstruct_body_from_photos(
 
         work = os.fspath(work_dir)
         folder = os.path.join(work, "images")
-        if os.path.isdir(folder):  # a previous run's links (only this function's sub-folders)
+        sfm_dir = os.path.join(work, "sfm")
+        for mine in (folder, sfm_dir):  # only what this function made is ever replaced
+            if os.path.exists(mine) and not os.path.isfile(os.path.join(mine, _MADE_HERE)):
+                raise ValueError(
+                    f"work_dir: {mine!r} exists and was not made by reconstruct_body_from_photos; "
+                    "give another work_dir (nothing in it is deleted)"
+                )
+        if os.path.isdir(folder):  # a previous run's links
             shutil.rmtree(folder)
         # one sub-folder per folder the photos are in (``per_folder``: one camera each)
         dirs = {d: f"camera{k:03d}" for k, d in enumerate(dict.fromkeys(
             os.path.dirname(os.path.abspath(p)) for p in paths))}  # fmt: skip
         for sub in dirs.values():
             os.makedirs(os.path.join(folder, sub))
+        with open(os.path.join(folder, _MADE_HERE), "w") as fh:
+            fh.write("links to photos made by socialcam.bodies.reconstruct_body_from_photos\n")
         for p, b in zip(paths, base, strict=True):
             link = f"{dirs[os.path.dirname(os.path.abspath(p))]}/{b}"
             linked[p] = link
@@ -743,13 +758,17 @@ def reconstruct_body_from_photos(
 
         out = reconstruct_static(
             folder,
-            os.path.join(work, "sfm"),
+            sfm_dir,
             camera_mode=mode,  # type: ignore[arg-type]
             camera_model=lens,  # type: ignore[arg-type]
             num_threads=threads,
             overwrite=True,
             progress=say,
         )
+        with open(os.path.join(sfm_dir, _MADE_HERE), "w") as fh:
+            fh.write(
+                "structure from motion made by socialcam.bodies.reconstruct_body_from_photos\n"
+            )
         model_dir = os.fspath(out)
     else:
         model_dir = os.fspath(model)
