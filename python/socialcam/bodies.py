@@ -41,15 +41,21 @@ _DATETIME, _SUBSEC, _OFFSET = 0x9003, 0x9291, 0x9011
 _EXIF_IFD = 0x8769
 
 
-def _exif_time(path: str | os.PathLike[str]) -> float | None:
-    """Capture time of one photo (POSIX seconds) from EXIF, ``None`` when it has none."""
+def _with_image(path: str | os.PathLike[str], read: Any) -> Any:
+    """``read(image)`` on the opened image file (PIL); an unreadable file is a ValueError
+    naming it."""
     from PIL import Image
 
     try:
         with Image.open(path) as im:
-            ifd = im.getexif().get_ifd(_EXIF_IFD)
+            return read(im)
     except OSError as exc:
         raise ValueError(f"photos: cannot read {os.fspath(path)!r} ({exc})") from None
+
+
+def _exif_time(path: str | os.PathLike[str]) -> float | None:
+    """Capture time of one photo (POSIX seconds) from EXIF, ``None`` when it has none."""
+    ifd = _with_image(path, lambda im: im.getexif().get_ifd(_EXIF_IFD))
     stamp = ifd.get(_DATETIME)
     if not stamp:
         return None
@@ -532,24 +538,13 @@ def detect_body_joints(
 def _read_rgb(path: str | os.PathLike[str]) -> npt.NDArray[np.uint8]:
     """One image file as ``(H, W, 3)`` uint8 RGB in its stored orientation (no EXIF
     rotation: the pixel frame COLMAP registers)."""
-    from PIL import Image
-
-    try:
-        with Image.open(path) as im:
-            return np.asarray(im.convert("RGB"))
-    except OSError as exc:
-        raise ValueError(f"photos: cannot read {os.fspath(path)!r} ({exc})") from None
+    return np.asarray(_with_image(path, lambda im: im.convert("RGB")))
 
 
 def _image_size(path: str | os.PathLike[str]) -> tuple[int, int]:
     """``(width, height)`` of an image file (its header only)."""
-    from PIL import Image
-
-    try:
-        with Image.open(path) as im:
-            return int(im.size[0]), int(im.size[1])
-    except OSError as exc:
-        raise ValueError(f"photos: cannot read {os.fspath(path)!r} ({exc})") from None
+    w, h = _with_image(path, lambda im: im.size)
+    return int(w), int(h)
 
 
 #: the file that marks a ``work_dir`` sub-folder as made (and replaceable) by

@@ -237,7 +237,8 @@ def main(argv: Sequence[str] | None = None) -> int:
     if args.command == "bodies":
         return _bodies(args)
     if args.command == "faces":
-        return _faces(args)
+        return _faces(args.run_dir, landmarks=args.landmarks, min_face=args.min_face,
+                      plots=not args.no_plots, as_json=args.json)  # fmt: skip
     if args.command == "view":
         return _view(args.run_dir, args.out, frames=not args.no_frames)
     if args.command == "render":
@@ -393,21 +394,29 @@ def _poses(parser: argparse.ArgumentParser, args: argparse.Namespace) -> int:
     return 0
 
 
-def _faces(args: argparse.Namespace) -> int:
+def _faces(
+    run_dir: str,
+    *,
+    landmarks: str = "mtcnn",
+    min_face: float = 12.0,
+    plots: bool = True,
+    as_json: bool = False,
+) -> int:
+    """``socialcam faces`` (and ``socialcam run --faces``) on a run folder."""
     from socialcam.pipeline import faces
 
     try:
         _, report = faces(
-            args.run_dir,
-            landmarks=args.landmarks,
-            min_face=args.min_face,
-            plots=not getattr(args, "no_plots", False),
+            run_dir,
+            landmarks=landmarks,
+            min_face=min_face,
+            plots=plots,
             progress=sys.stderr.isatty(),
         )
     except ValueError as exc:
         print(f"socialcam faces: error: {exc}", file=sys.stderr)
         return 2
-    if args.json:
+    if as_json:
         print(json.dumps(report, indent=2))
     else:
         print(
@@ -419,7 +428,7 @@ def _faces(args: argparse.Namespace) -> int:
             d = p.get("ego_exo_disagreement_deg_median")
             extra = "" if d is None else f", ego/exo disagreement {d:.1f}° median"
             print(f"  {p['name']}: {p['instants']} instants{extra}")
-    print(f"faces written to {args.run_dir}/faces.csv")
+    print(f"faces written to {run_dir}/faces.csv")
     return 0
 
 
@@ -606,8 +615,7 @@ def _run(parser: argparse.ArgumentParser, args: argparse.Namespace) -> int:
             print(f"warning: {w}", file=sys.stderr)
     print(f"results written to {args.out}")
     if args.faces:
-        code = _faces(argparse.Namespace(run_dir=args.out, landmarks="mtcnn", min_face=12.0,
-                                         json=False, no_plots=args.no_plots))  # fmt: skip
+        code = _faces(args.out, plots=not args.no_plots)
         if code:
             return code
     return _view(args.out, None, frames=True) if args.rerun else 0
