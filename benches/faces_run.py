@@ -9,7 +9,16 @@ the camera centres, and by the similarity of the camera poses: orientations and 
 "true poses" row. Prints per seed: posed fraction, detected, false surviving, association,
 landmark error (mm), gaze error (deg), face-instants, wearers anchored; both rows.
 
-Run: python benches/faces_run.py OUT_DIR [seed ...]
+Scale from faces (session 35): a run whose SfM found no floor has no metric scale; then
+``pipeline.faces(..., interocular=INTEROCULAR)`` takes it from the faces' eyes
+(``faces.scale_from_faces``), and the seed is scored. On every seed the row "scale" also
+gives the error of that face scale against the truth (for runs with a metric scale: on the
+same detections with the poses put back in map units) next to the eye-height scale's. With
+``face_spread=X`` the people's faces differ in size (``render_scene(face_scales=...)``, eye
+distances 63 mm × N(1, X), seeded per scene; adults: X ≈ 0.06), so the face scale meets
+people's real differences; without, every face is drawn 63 mm.
+
+Run: python benches/faces_run.py OUT_DIR [seed ...] [face_spread=X]
 """
 
 from __future__ import annotations
@@ -22,7 +31,7 @@ from pathlib import Path
 import numpy as np
 
 from socialcam import Cameras
-from socialcam.faces import reconstruct_faces
+from socialcam.faces import INTEROCULAR, reconstruct_faces, scale_from_faces
 from socialcam.pipeline import RunWarning, faces, run
 from socialcam.sfm import VideoReconstruction
 from socialcam.synth.evaluate import _alignment, faces_vs_truth
@@ -36,14 +45,21 @@ def _on_video_frames(dets, posed_times, truth_times):
     return dataclasses.replace(dets, frame=k[dets.frame], n_frames=len(truth_times))
 
 
-def evaluate(out: Path, seed: int) -> None:
-    scene = render_scene(out / f"scene{seed}", n_wearers=4, n_people=2, duration=3.0, fps=10.0,
-                         size=(1280, 960), seed=seed, faces=True, arrangement="circle",
-                         audio=False, calibration=False, start_spread=0.0, progress=False)  # fmt: skip
+def evaluate(out: Path, seed: int, face_spread: float = 0.0) -> None:
+    factors = None
+    tag = ""
+    if face_spread > 0:
+        rng = np.random.default_rng([seed, 35])
+        factors = np.clip(rng.normal(1.0, face_spread, 6), 0.7, 1.3).tolist()
+        tag = f"_fs{face_spread:g}"
+    scene = render_scene(out / f"scene{seed}{tag}", n_wearers=4, n_people=2, duration=3.0,
+                         fps=10.0, size=(1280, 960), seed=seed, faces=True,
+                         arrangement="circle", audio=False, calibration=False,
+                         start_spread=0.0, progress=False, face_scales=factors)  # fmt: skip
     tr = scene.truth
     names = list(tr.names)
     eye = float(np.mean([tr.C[v][:, 2].mean() for v in range(len(names))]))
-    folder = out / f"run{seed}"
+    folder = out / f"run{seed}{tag}"
     with warnings.catch_warnings():
         warnings.simplefilter("ignore", RunWarning)  # no calibration segment: optical axis
         res = run(
@@ -57,14 +73,21 @@ def evaluate(out: Path, seed: int) -> None:
             overlays=False,
             num_threads=1,
         )  # fmt: skip  (one thread: the same poses on every run)
-    try:
-        vf, report = faces(folder, progress=False)
-    except ValueError as exc:  # e.g. poses without a metric scale: said, next seed
+    try:  # a run without a metric scale takes it from the faces' eyes
+        vf, report = faces(folder, progress=False, interocular=INTEROCULAR)
+    except ValueError as exc:  # e.g. no face to measure: said, next seed
         print(f"{seed} posed {res.report['poses']['registered_fraction']:.3f}: not scored ({exc}; "
               f"run warnings: {res.report['poses']['warnings']})", flush=True)  # fmt: skip
         return
     rec = VideoReconstruction.load(folder / "cache" / "sfm")
     used = list(vf.names)
+    if vf.scale is not None:  # the faces' scale: the world is the map times it
+        rec = dataclasses.replace(
+            rec,
+            cameras={n: Cameras(c.K, c.R, c.C * vf.scale.metres_per_unit, c.times)
+                     for n, c in rec.cameras.items()},
+            points=rec.points * vf.scale.metres_per_unit,
+        )  # fmt: skip
     truth_cams = {n: tr.cameras(names.index(n)) for n in used}
     A, B, RA, RB = [], [], [], []
     for n in used:
@@ -91,6 +114,27 @@ def evaluate(out: Path, seed: int) -> None:
     print(f"{seed} poses after the pose alignment: centres {1e3 * np.median(cen):.0f} mm, "
           f"rotations {np.median(rot):.2f} deg median (centres-only alignment: centres "
           f"{1e3 * np.median(np.linalg.norm(s * A_ @ R.T + t - B_, axis=1)):.0f} mm)")  # fmt: skip
+
+    # the face scale against the truth: truth metres per map unit = sp × (metres per map unit
+    # of the world the faces were reconstructed in)
+    if vf.scale is not None:
+        fs, unit, how = vf.scale, vf.scale.metres_per_unit, "faces (no floor)"
+    else:
+        unit, how = rec.scale, "eye height"
+        fs, _ = scale_from_faces(
+            list(vf.detections),
+            [Cameras(rec.cameras[n].K, rec.cameras[n].R, rec.cameras[n].C / unit,
+                     rec.cameras[n].times) for n in used],
+            interocular=INTEROCULAR,
+        )  # fmt: skip
+    true_unit = sp * unit
+    faces_err = fs.metres_per_unit / true_unit - 1
+    people = [] if factors is None else factors
+    print(f"{seed} scale: run's from {how}; error of the eye-height scale "
+          f"{'n/a' if vf.scale is not None else f'{100 * (1 / sp - 1):+.1f} %'}, of the face "
+          f"scale {100 * faces_err:+.1f} % (± {100 * fs.relative_sd:.1f} % said, "
+          f"{len(fs.person)} faces measured; people's eye distances "
+          f"{np.round(np.array(people) * 63, 1).tolist() or 'all 63'} mm)", flush=True)  # fmt: skip
 
     def to_truth(X: np.ndarray) -> np.ndarray:
         return s * np.asarray(X) @ R.T + t
@@ -129,8 +173,12 @@ def evaluate(out: Path, seed: int) -> None:
 
 def main(argv: list[str]) -> None:
     out = Path(argv[0])
-    for seed in [int(a) for a in argv[1:]] or [11]:
-        evaluate(out, seed)
+    opts = dict(a.split("=", 1) for a in argv[1:] if "=" in a)
+    if set(opts) - {"face_spread"}:
+        raise SystemExit(f"unknown options {sorted(set(opts) - {'face_spread'})}")
+    spread = float(opts.get("face_spread", 0.0))
+    for seed in [int(a) for a in argv[1:] if "=" not in a] or [11]:
+        evaluate(out, seed, spread)
 
 
 if __name__ == "__main__":

@@ -122,8 +122,9 @@ def main(argv: Sequence[str] | None = None) -> int:
         "--faces",
         action="store_true",
         help="then the faces of everyone in view (as socialcam faces RUN_DIR; needs metric "
-        "poses: --eye-height or --known-distance)",
+        "poses: --eye-height or --known-distance, or --scale-from-faces)",
     )
+    _scale_from_faces_option(rn, "with --faces: ")
     rn.add_argument("--json", action="store_true", help="print the whole report as JSON")
     bd = sub.add_parser(
         "bodies",
@@ -180,7 +181,8 @@ def main(argv: Sequence[str] | None = None) -> int:
         help="faces of everyone in view in a run folder: 3D faces and exo gaze rays, each "
         "wearer's exo gaze against its ego gaze (faces.csv, faces.json)",
     )
-    fc.add_argument("run_dir", help="a folder written by socialcam run (metric poses)")
+    fc.add_argument("run_dir", help="a folder written by socialcam run")
+    _scale_from_faces_option(fc)
     fc.add_argument(
         "--landmarks",
         choices=["mtcnn", "facemesh"],
@@ -238,7 +240,8 @@ def main(argv: Sequence[str] | None = None) -> int:
         return _bodies(args)
     if args.command == "faces":
         return _faces(args.run_dir, landmarks=args.landmarks, min_face=args.min_face,
-                      plots=not args.no_plots, as_json=args.json)  # fmt: skip
+                      plots=not args.no_plots, as_json=args.json,
+                      interocular=args.scale_from_faces)  # fmt: skip
     if args.command == "view":
         return _view(args.run_dir, args.out, frames=not args.no_frames)
     if args.command == "render":
@@ -394,6 +397,22 @@ def _poses(parser: argparse.ArgumentParser, args: argparse.Namespace) -> int:
     return 0
 
 
+def _scale_from_faces_option(parser: argparse.ArgumentParser, prefix: str = "") -> None:
+    """``--scale-from-faces [METRES]`` (``socialcam faces`` and ``socialcam run --faces``)."""
+    from socialcam.faces import INTEROCULAR
+
+    parser.add_argument(
+        "--scale-from-faces",
+        type=float,
+        nargs="?",
+        const=INTEROCULAR,
+        default=None,
+        metavar="METRES",
+        help=f"{prefix}where the run's poses have no metric scale, take it from the faces, "
+        f"the people's eyes METRES apart on average (default {INTEROCULAR}, adults)",
+    )
+
+
 def _faces(
     run_dir: str,
     *,
@@ -401,6 +420,7 @@ def _faces(
     min_face: float = 12.0,
     plots: bool = True,
     as_json: bool = False,
+    interocular: float | None = None,
 ) -> int:
     """``socialcam faces`` (and ``socialcam run --faces``) on a run folder."""
     from socialcam.pipeline import faces
@@ -412,6 +432,7 @@ def _faces(
             min_face=min_face,
             plots=plots,
             progress=sys.stderr.isatty(),
+            interocular=interocular,
         )
     except ValueError as exc:
         print(f"socialcam faces: error: {exc}", file=sys.stderr)
@@ -424,6 +445,13 @@ def _faces(
             f"instants; {report['wearers_found']} wearers and {report['others_found']} "
             "people without a camera reconstructed"
         )
+        sc = report["scale"]
+        if sc["source"] == "faces":
+            print(
+                f"metric scale from {sc['people_measured']} faces' eyes: "
+                f"{sc['metres_per_unit']:.4g} m per map unit (± {100 * sc['relative_sd']:.0f} % "
+                "from the spread of their eye distances)"
+            )
         for p in report["people"]:
             d = p.get("ego_exo_disagreement_deg_median")
             extra = "" if d is None else f", ego/exo disagreement {d:.1f}° median"
@@ -615,7 +643,7 @@ def _run(parser: argparse.ArgumentParser, args: argparse.Namespace) -> int:
             print(f"warning: {w}", file=sys.stderr)
     print(f"results written to {args.out}")
     if args.faces:
-        code = _faces(args.out, plots=not args.no_plots)
+        code = _faces(args.out, plots=not args.no_plots, interocular=args.scale_from_faces)
         if code:
             return code
     return _view(args.out, None, frames=True) if args.rerun else 0

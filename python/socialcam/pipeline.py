@@ -2019,11 +2019,15 @@ class VideoFaces:
     names : the wearers whose cameras were used, in the order of ``faces``' cameras
     detections : per wearer the :class:`socialcam.faces.FaceDetections` of its posed frames
         (``frame`` = index into its cameras), boxes and landmarks undistorted to ``K``
+    scale : with ``interocular``, the :class:`socialcam.faces.FaceScale` measured on the
+        faces (``faces`` are then in metres: the given cameras' centres times
+        ``scale.metres_per_unit``); ``None`` when the cameras were in metres already
     """
 
     faces: Any
     names: tuple[str, ...]
     detections: tuple[Any, ...]
+    scale: Any = None
 
 
 def faces_in_videos(
@@ -2035,6 +2039,7 @@ def faces_in_videos(
     min_face: float = 12.0,
     progress: bool = True,
     face_options: Any = None,
+    interocular: float | None = None,
     **overrides: Any,
 ) -> VideoFaces:
     """3D faces and exo gaze rays of everyone the wearers' cameras see (Sec 3.2.2), from
@@ -2051,6 +2056,10 @@ def faces_in_videos(
         clock; e.g. ``VideoReconstruction.cameras``) in metres; persons without are skipped
     offsets : person → clock offset (s, ``t_common = t_local + offset``); default 0
     face_options, overrides : :class:`socialcam.faces.FaceOptions`
+    interocular : the cameras are NOT in metres (a map without a scale): their scale is
+        measured on the faces, whose eyes are taken to be this many metres apart on average
+        (``socialcam.faces.INTEROCULAR`` = 0.063 for adults;
+        :func:`socialcam.faces.scale_from_faces`); ``None``: the cameras are in metres
 
     Returns
     -------
@@ -2061,12 +2070,14 @@ def faces_in_videos(
     ValueError
         Fewer than two posed wearers, cameras without times, a video that cannot be read.
     """
-    from socialcam.faces import FaceDetections, detect_faces, reconstruct_faces
+    from socialcam.faces import FaceDetections, detect_faces, reconstruct_faces, scale_from_faces
     from socialcam.video import open_video
 
     if isinstance(videos, (str, os.PathLike)) or not isinstance(videos, Sequence):
         raise ValueError("videos: expected a list of videos (one per wearer)")
     check_bool(progress, "progress")
+    if interocular is not None:
+        check_float(interocular, "interocular", min=1e-3, max=1.0)
     names = [Path(p).stem for p in videos]
     use = [i for i, n in enumerate(names) if n in cameras and len(cameras[n]) > 0]
     if len(use) < 2:
@@ -2125,8 +2136,16 @@ def faces_in_videos(
             )
         )
         cams.append(cam)
-    faces = reconstruct_faces(dets, cams, anchors=True, options=face_options, **overrides)
-    return VideoFaces(faces=faces, names=tuple(names[i] for i in use), detections=tuple(dets))
+    if interocular is not None:
+        scale, faces = scale_from_faces(
+            dets, cams, interocular=interocular, anchors=True, options=face_options, **overrides
+        )
+    else:
+        scale = None
+        faces = reconstruct_faces(dets, cams, anchors=True, options=face_options, **overrides)
+    return VideoFaces(
+        faces=faces, names=tuple(names[i] for i in use), detections=tuple(dets), scale=scale
+    )
 
 
 def faces_csv(faces: Any, names: Sequence[str]) -> str:
@@ -2158,6 +2177,7 @@ def faces(
     plots: bool = True,
     progress: bool = True,
     face_options: Any = None,
+    interocular: float | None = None,
     **overrides: Any,
 ) -> tuple[VideoFaces, dict[str, Any]]:
     """Faces of everyone in view for a folder written by :func:`run` (its videos and
@@ -2170,14 +2190,23 @@ def faces(
     ``faces_top.png`` (:func:`socialcam.viz.plot_faces_top`) into ``run_dir``. Returns the
     :class:`VideoFaces` and that report.
 
+    The faces are reconstructed in metres. A run without a metric scale (no floor found, no
+    ``known_distance``) is scaled by the faces' eyes when ``interocular`` is given (the
+    people's mean eye distance in metres, ``socialcam.faces.INTEROCULAR`` = 0.063 for
+    adults; :func:`socialcam.faces.scale_from_faces`): the report's ``scale`` says which
+    scale was used and, for one from faces, its expected error from the spread between
+    people. A run with a metric scale keeps it; the report gives every face's measured eye
+    distance either way (``interocular_m``), a check of that scale.
+
     Raises
     ------
     ValueError
-        ``run_dir`` holds no run, its poses have no metric scale (the face tests are in
-        metres: give ``eye_height`` or ``known_distance`` to :func:`run`), and everything
-        :func:`faces_in_videos` rejects.
+        ``run_dir`` holds no run, its poses have no metric scale and no ``interocular`` is
+        given, and everything :func:`faces_in_videos` rejects.
+    socialcam.errors.DegenerateError
+        With ``interocular``, no face seen by two cameras at once to measure.
     """
-    from socialcam.faces import fuse_ego_exo
+    from socialcam.faces import fuse_ego_exo, interocular_distances
 
     check_bool(plots, "plots")
     out = Path(run_dir)
@@ -2192,18 +2221,22 @@ def faces(
     if missing:
         raise ValueError(f"run_dir: the run's videos are gone: {missing[:3]}")
     rec = VideoReconstruction.load(out / "cache" / "sfm")
-    if not np.isfinite(rec.scale):
+    metric = bool(np.isfinite(rec.scale))
+    if not metric and interocular is None:
         raise ValueError(
             "run_dir: the run's poses have no metric scale; faces need metres (rerun "
-            "socialcam run with --eye-height or --known-distance)"
+            "socialcam run with --eye-height or --known-distance, or scale by the faces' "
+            "eyes: interocular=0.063, socialcam faces --scale-from-faces)"
         )
     offsets = {n: float(rec.offsets[i]) for i, n in enumerate(rec.names)}
     t0 = time.perf_counter()
     found = faces_in_videos(
         videos, rec.cameras, offsets=offsets, landmarks=landmarks, min_face=min_face,
-        progress=progress, face_options=face_options, **overrides,
+        progress=progress, face_options=face_options,
+        interocular=None if metric else interocular, **overrides,
     )  # fmt: skip
     f3, names = found.faces, list(found.names)
+    s_faces = 1.0 if found.scale is None else float(found.scale.metres_per_unit)
     atomic_write_bytes(out / "faces.csv", faces_csv(f3, names).encode())
     # ego (gaze.csv) against exo per wearer, at the instants both exist
     ego: dict[str, dict[float, tuple[np.ndarray, float]]] = {}
@@ -2217,6 +2250,8 @@ def faces(
             )
     V = len(names)
     people = []
+    io_cols, io_d = interocular_distances(f3, 1)
+    io_of = dict(zip(io_cols.tolist(), io_d.tolist(), strict=True))
     for j, pid in enumerate(f3.person):
         ok = np.isfinite(f3.v[:, j]).all(axis=1)
         entry: dict[str, Any] = {
@@ -2225,6 +2260,7 @@ def faces(
             "wearer": bool(f3.wearer[j]),
             "instants": int(ok.sum()),
             "h_median": float(np.median(f3.h[ok, j])) if ok.any() else None,
+            "interocular_m": io_of.get(j),
         }
         if pid < V and names[pid] in ego:
             at = ego[names[pid]]
@@ -2236,8 +2272,20 @@ def faces(
                 entry["ego_exo_instants"] = len(both)
                 entry["ego_exo_disagreement_deg_median"] = float(np.degrees(np.median(dis)))
         people.append(entry)
+    if found.scale is None:
+        scale_info: dict[str, Any] = {"source": "run", "metres_per_unit": float(rec.scale)}
+    else:
+        fs = found.scale
+        scale_info = {
+            "source": "faces",
+            "metres_per_unit": fs.metres_per_unit,
+            "assumed_interocular_m": float(cast(float, interocular)),
+            "people_measured": len(fs.person),
+            "relative_sd": fs.relative_sd,
+        }
     report = {
         "landmarks": landmarks,
+        "scale": scale_info,
         "cameras": names,
         "detections": {n: len(d) for n, d in zip(names, f3.detection_person, strict=True)},
         "associated_fraction": {
@@ -2255,5 +2303,10 @@ def faces(
         from socialcam.io import save_figure
         from socialcam.viz import plot_faces_top
 
-        save_figure(plot_faces_top(f3, names, rec.cameras), out / "faces_top.png")
+        cams = rec.cameras
+        if found.scale is not None:  # the faces are in metres: so are the cameras drawn
+            cams = {
+                n: Cameras(c.K, c.R, np.asarray(c.C) * s_faces, c.times) for n, c in cams.items()
+            }
+        save_figure(plot_faces_top(f3, names, cams), out / "faces_top.png")
     return found, report

@@ -1049,9 +1049,13 @@ def load_face_set() -> tuple[list[U8Image], list[FloatArray]]:
     return images, marks
 
 
-def _person_faces(P: int) -> tuple[list[U8Image], list[FloatArray]]:
+def _person_faces(
+    P: int, scales: Sequence[float] | None = None
+) -> tuple[list[U8Image], list[FloatArray]]:
     """One face per person: the shipped photographs, mirrored every other round (a mirror
-    image swaps the image-left/right landmarks back into order)."""
+    image swaps the image-left/right landmarks back into order); with ``scales``, person
+    ``p``'s photograph magnified by ``scales[p]`` about the texture's centre (its border
+    pixels extend where it shrinks), and its landmarks with it."""
     images, marks = load_face_set()
     out_i, out_m = [], []
     for p in range(P):
@@ -1061,7 +1065,17 @@ def _person_faces(P: int) -> tuple[list[U8Image], list[FloatArray]]:
             lm = lm.copy()
             lm[:, 0] = img.shape[1] - 1 - lm[:, 0]
             lm = lm[[1, 0, 2, 4, 3]]
-        out_i.append(img)
+        a = 1.0 if scales is None else float(scales[p])
+        if a != 1.0:
+            c = np.array([(img.shape[1] - 1) / 2, (img.shape[0] - 1) / 2])
+            M = np.array([[a, 0.0, (1 - a) * c[0]], [0.0, a, (1 - a) * c[1]]])
+            warped = cv2.warpAffine(
+                img, M, (img.shape[1], img.shape[0]), flags=cv2.INTER_LINEAR,
+                borderMode=cv2.BORDER_REPLICATE,
+            )  # fmt: skip
+            img = np.ascontiguousarray(warped, dtype=np.uint8)
+            lm = a * (lm - c) + c
+        out_i.append(np.ascontiguousarray(img, dtype=np.uint8))
         out_m.append(lm)
     return out_i, out_m
 
@@ -1408,6 +1422,7 @@ def render_scene(
     faces: bool = False,
     n_people: int = 0,
     arrangement: str = "loop",
+    face_scales: Sequence[float] | None = None,
 ) -> RenderedScene:
     """Renders a scene of ``n_wearers`` head-mounted cameras (module docstring) into
     ``out_dir``: ``wearer<v>.mp4`` (H.264 + AAC, ``size = (width, height)``, ``fps``,
@@ -1425,7 +1440,10 @@ def render_scene(
     around the wearers' loop and looking at wearers; drawn when ``bodies``);
     ``arrangement``: ``"loop"`` (the wearers walk around the pillar, the module docstring)
     or ``"circle"`` (everyone stands in a conversation circle and looks at each other's
-    heads, so that faces are seen by several cameras at once; no calibration segments).
+    heads, so that faces are seen by several cameras at once; no calibration segments);
+    ``face_scales`` (with ``faces``: per person, wearers then people, a factor 0.7–1.3 on
+    the size of its face photograph, whose eyes are ``socialcam.faces.INTEROCULAR`` apart
+    at 1: people's faces differ; default 1 for everyone).
 
     Deterministic: same arguments, same files.
     """
@@ -1450,6 +1468,17 @@ def render_scene(
     check_choice(arrangement, "arrangement", ("loop", "circle"))
     if arrangement == "circle" and calibration:
         raise ValueError("calibration: the circle arrangement has no calibration segments")
+    fscales: list[float] | None = None
+    if face_scales is not None:
+        if not faces:
+            raise ValueError("face_scales: only with faces=True")
+        if isinstance(face_scales, (str, bytes)) or len(face_scales) != V + Q:
+            raise ValueError(
+                f"face_scales: expected {V + Q} factors (wearers then people), got {face_scales!r}"
+            )
+        fscales = [
+            check_float(a, f"face_scales[{i}]", min=0.7, max=1.3) for i, a in enumerate(face_scales)
+        ]
     if faces and head_textures is not None:
         raise ValueError("head_textures: give either head_textures or faces=True, not both")
     if (faces or Q) and not bodies:
@@ -1536,7 +1565,7 @@ def render_scene(
     face_shape = (0, 0)
     head_up: FloatArray | None = None
     if faces:
-        face_imgs, face_lm = _person_faces(V + Q)
+        face_imgs, face_lm = _person_faces(V + Q, fscales)
         face_shape = face_imgs[0].shape[:2]
         for p_, img_ in enumerate(face_imgs):
             tex.append(img_)
