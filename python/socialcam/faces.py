@@ -13,6 +13,9 @@ person, 3D faces and their primary gaze rays (thesis Sec 3.2.2, Eq 3.2–3.4).
   rigid face (its shape shared by the track, a pose per instant fitted to the detections,
   rotations tied over time), and each face gives a primary gaze ray
   (:class:`socialcam.GazeRays`).
+- :func:`scale_from_faces` gives cameras posed in a map of unknown unit (structure from
+  motion without a floor or a known distance) a metric scale: the people's eyes are
+  ``INTEROCULAR`` (63 mm) apart on median.
 
 Landmark order everywhere: ``LANDMARKS`` = left eye, right eye, nose, left mouth corner,
 right mouth corner, where "left" is the IMAGE left of a face seen from the front (the
