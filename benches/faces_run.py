@@ -31,7 +31,7 @@ from pathlib import Path
 import numpy as np
 
 from socialcam import Cameras
-from socialcam.faces import INTEROCULAR, reconstruct_faces, scale_from_faces
+from socialcam.faces import INTEROCULAR, FaceDetections, reconstruct_faces, scale_from_faces
 from socialcam.pipeline import RunWarning, faces, run
 from socialcam.sfm import VideoReconstruction
 from socialcam.synth.evaluate import _alignment, faces_vs_truth
@@ -43,6 +43,29 @@ def _on_video_frames(dets, posed_times, truth_times):
     matcher indexes)."""
     k = np.array([int(np.argmin(np.abs(truth_times - t))) for t in posed_times])
     return dataclasses.replace(dets, frame=k[dets.frame], n_frames=len(truth_times))
+
+
+def _on_truth_cameras(tr, used, dets, faces3d):
+    """The detections and faces of the cameras ``used`` (those SfM placed, a subset of the
+    truth's) put on the truth's cameras for ``faces_vs_truth``: no detections for the
+    others, the wearers' person ids renumbered to the truth's camera indices."""
+    names = list(tr.names)
+    if list(used) == names:
+        return dets, faces3d
+    V, U = len(names), len(used)
+    full, dp = [], []
+    for v, n in enumerate(names):
+        if n in used:
+            full.append(dets[used.index(n)])
+            dp.append(faces3d.detection_person[used.index(n)])
+        else:
+            full.append(FaceDetections(
+                frame=np.zeros(0, np.int64), box=np.zeros((0, 4)), confidence=np.zeros(0),
+                landmarks=np.zeros((0, 5, 2)), n_frames=len(tr.cameras(v)), size=dets[0].size,
+                landmark_source=dets[0].landmark_source))  # fmt: skip
+            dp.append(np.zeros(0, np.int64))
+    person = np.array([names.index(used[p]) if p < U else p - U + V for p in faces3d.person])
+    return full, dataclasses.replace(faces3d, person=person, detection_person=tuple(dp))
 
 
 def evaluate(out: Path, seed: int, face_spread: float = 0.0) -> None:
@@ -144,14 +167,16 @@ def evaluate(out: Path, seed: int, face_spread: float = 0.0) -> None:
 
     dets = [_on_video_frames(d, rec.cameras[n].times, truth_cams[n].times)
             for n, d in zip(used, vf.detections, strict=True)]  # fmt: skip
-    r_sfm = faces_vs_truth(tr, dets, vf.faces, to_truth=to_truth)
-    r_sfm_p = faces_vs_truth(tr, dets, vf.faces, to_truth=to_truth_poses)
+    dets, f_sfm = _on_truth_cameras(tr, used, dets, vf.faces)
+    r_sfm = faces_vs_truth(tr, dets, f_sfm, to_truth=to_truth)
+    r_sfm_p = faces_vs_truth(tr, dets, f_sfm, to_truth=to_truth_poses)
     posed_true = []
     for n in used:
         tc = truth_cams[n]
         k = [int(np.argmin(np.abs(tc.times - x))) for x in rec.cameras[n].times]
         posed_true.append(Cameras(tc.K[k], tc.R[k], tc.C[k], rec.cameras[n].times))
     f_true = reconstruct_faces(list(vf.detections), posed_true, anchors=True)
+    _, f_true = _on_truth_cameras(tr, used, list(vf.detections), f_true)
     r_true = faces_vs_truth(tr, dets, f_true)
     posed = res.report["poses"]["registered_fraction"]
     dis = [p["ego_exo_disagreement_deg_median"] for p in report["people"]
