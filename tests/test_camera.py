@@ -133,6 +133,16 @@ def test_from_colmap_pixel_convention_and_centres(tmp_path):
     # Camera b has radial distortion: undistorting COLMAP's pixel gives our pinhole pixel.
     np.testing.assert_allclose(cams[1].undistort_points(theirs[None])[0], ours, atol=1e-6)
     assert np.linalg.norm(theirs - ours) > 1e-3  # distortion is really there
+    # scaled (a map put in metres): centres times s, projections of scaled points and the
+    # lens unchanged
+    big = cams.scaled(2.5)
+    np.testing.assert_allclose(big.C, cams.C * 2.5)
+    np.testing.assert_array_equal(big.R, cams.R)
+    np.testing.assert_allclose(big[1].project(2.5 * X)[0], ours, atol=1e-9)
+    np.testing.assert_allclose(big[1].undistort_points(theirs[None])[0], ours, atol=1e-6)
+    for bad in (0.0, -1.0, float("nan"), float("inf")):
+        with pytest.raises(ValueError, match="s"):
+            cams.scaled(bad)
 
 
 def test_from_colmap_errors(tmp_path):

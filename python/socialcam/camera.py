@@ -137,6 +137,19 @@ class Cameras:
         out._times = readonly(as_float_array(times, "times", (len(self),)))
         return out
 
+    def scaled(self, s: float) -> Cameras:
+        """The same cameras in a world scaled by ``s`` about its origin (centres ``C · s``;
+        intrinsics, rotations, lens and times kept): e.g. a map of unknown unit put in
+        metres once its scale is known."""
+        from socialcam._validate import check_float
+
+        s_ = check_float(s, "s")
+        if not s_ > 0:
+            raise ValueError(f"s: must be > 0, got {s}")
+        out = self[:]
+        out._C = readonly(np.ascontiguousarray(self._C * s_))
+        return out
+
     # ----------------------------------------------------------------- geometry
     def project(
         self, points: npt.ArrayLike, *, return_depth: bool = False

@@ -124,7 +124,6 @@ def main(argv: Sequence[str] | None = None) -> int:
         help="then the faces of everyone in view (as socialcam faces RUN_DIR; needs metric "
         "poses: --eye-height or --known-distance, or --scale-from-faces)",
     )
-    _scale_from_faces_option(rn, "with --faces: ")
     rn.add_argument("--json", action="store_true", help="print the whole report as JSON")
     bd = sub.add_parser(
         "bodies",
@@ -324,6 +323,7 @@ def _sfm_flags(p: argparse.ArgumentParser) -> None:
         metavar=("PERSON_A", "TIME_A", "PERSON_B", "TIME_B", "METRES"),
         help="distance between two camera centres (persons at common-clock times)",
     )
+    _scale_from_faces_option(p)
     p.add_argument("--seed", type=int, default=None, help="random seed (default: 0)")
 
 
@@ -368,6 +368,7 @@ def _poses(parser: argparse.ArgumentParser, args: argparse.Namespace) -> int:
             known_distance=known,
             eye_height=args.eye_height,
             progress=sys.stderr.isatty(),
+            scale_from_faces=args.scale_from_faces,
             global_mapping=args.global_mapping,
             **_given(
                 args,
@@ -397,8 +398,8 @@ def _poses(parser: argparse.ArgumentParser, args: argparse.Namespace) -> int:
     return 0
 
 
-def _scale_from_faces_option(parser: argparse.ArgumentParser, prefix: str = "") -> None:
-    """``--scale-from-faces [METRES]`` (``socialcam faces`` and ``socialcam run --faces``)."""
+def _scale_from_faces_option(parser: argparse.ArgumentParser) -> None:
+    """``--scale-from-faces [METRES]`` (``socialcam poses``, ``run`` and ``faces``)."""
     from socialcam.faces import INTEROCULAR
 
     parser.add_argument(
@@ -408,8 +409,9 @@ def _scale_from_faces_option(parser: argparse.ArgumentParser, prefix: str = "") 
         const=INTEROCULAR,
         default=None,
         metavar="METRES",
-        help=f"{prefix}where the run's poses have no metric scale, take it from the faces, "
-        f"the people's eyes METRES apart on average (default {INTEROCULAR}, adults)",
+        help="where the poses have no metric scale (no --known-distance, no floor found "
+        "for --eye-height), take it from the faces in view, the people's eyes METRES apart "
+        f"on median (default {INTEROCULAR}, adults; needs the faces extra)",
     )
 
 
@@ -611,6 +613,7 @@ def _run(parser: argparse.ArgumentParser, args: argparse.Namespace) -> int:
                 intrinsics=intrinsics,
                 known_distance=tuple(kd) if kd is not None else None,  # type: ignore[arg-type]
                 eye_height=eh,  # type: ignore[arg-type]
+                scale_from_faces=args.scale_from_faces,
                 overwrite=args.force,
                 progress=sys.stderr.isatty(),
                 **options,  # type: ignore[arg-type]

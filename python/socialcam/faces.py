@@ -1746,9 +1746,7 @@ class FaceScale:
 
 
 def _scaled(cameras: Sequence[Any], s: float) -> list[Any]:
-    from socialcam.camera import Cameras
-
-    return [Cameras(c.K, c.R, np.asarray(c.C) * s, c.times) for c in cameras]
+    return [c.scaled(s) for c in cameras]
 
 
 def _neighbour_guess(cameras: Sequence[Any], tol: float | None) -> float:

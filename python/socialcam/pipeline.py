@@ -125,6 +125,7 @@ def poses(
     eye_height: float | None = None,
     options: VideoSfmOptions | None = None,
     progress: bool = True,
+    scale_from_faces: float | None = None,
     **overrides: Any,
 ) -> VideoReconstruction:
     """Camera poses of every video at ``fps`` on one clock, written to ``out_dir``.
@@ -133,10 +134,23 @@ def poses(
     confidence and method per video), ``report.json`` (stage times, counts, per-frame
     quality summary, dropped frames with reasons, warnings) and ``cache/sfm``. A rerun with
     the same videos and options reloads the cached reconstruction instead of recomputing.
-    Arguments as :func:`socialcam.sfm.reconstruct_videos`.
+    Arguments as :func:`socialcam.sfm.reconstruct_videos`, and:
+
+    scale_from_faces : where the poses come out without a metric scale (no
+        ``known_distance``, no floor found for ``eye_height``), take it from the faces the
+        wearers see, the people's eyes this many metres apart on median
+        (``socialcam.faces.INTEROCULAR`` = 0.063 for adults; the ``faces`` extra): faces are
+        searched on up to ``FACE_SCALE_BLOCKS`` stretches of ``FACE_SCALE_BLOCK`` posed
+        instants spread over the videos (:func:`socialcam.faces.scale_from_faces`). The
+        report's ``face_scale`` gives the scale, its expected error and the faces measured;
+        ``cache/sfm`` keeps the map's own unit and ``face_scale.json`` the scale
+        (:func:`load_poses` applies it). No face to measure leaves the map's unit, with a
+        warning.
     """
     opts = _options(options, {**overrides, "fps": fps})
     _check_video_args(videos, out_dir, sync, intrinsics, known_distance, eye_height, progress)
+    if scale_from_faces is not None:
+        check_float(scale_from_faces, "scale_from_faces", min=1e-3, max=1.0)
     out = Path(out_dir)
     out.mkdir(parents=True, exist_ok=True)
     key = _poses_key(videos, opts, sync, intrinsics, known_distance, eye_height)
@@ -172,6 +186,13 @@ def poses(
             )
             raise
         atomic_write_bytes(key_file, (key + "\n").encode())
+    face_scale: dict[str, Any] | None = None
+    if scale_from_faces is None:  # the poses stay in the map's unit: so must load_poses
+        (cache / FACE_SCALE_FILE).unlink(missing_ok=True)
+    elif not np.isfinite(rec.scale):
+        face_scale = _face_scale(rec, videos, cache, key, scale_from_faces, progress)
+        if "metres_per_unit" in face_scale:
+            rec = _with_scale(rec, face_scale["metres_per_unit"])
     atomic_write_bytes(out / "poses.csv", poses_csv(rec).encode())
     sync_out = {
         "clock": "common: t = t_local + offset; starts at the first frame of the first video",
@@ -194,7 +215,100 @@ def poses(
     report["reasons"] = {
         n: {str(k): v for k, v in sorted(rec.quality[n].reasons.items())} for n in rec.names
     }
+    if face_scale is not None:
+        report["face_scale"] = face_scale
+        if "metres_per_unit" in face_scale:
+            report["warnings"] = [*report.get("warnings", []), (
+                f"metric scale from {face_scale['people_measured']} faces' eyes (assumed "
+                f"{1e3 * face_scale['interocular_m']:.0f} mm apart): {face_scale['metres_per_unit']:.4g} m "
+                f"per map unit, ± {100 * face_scale['relative_sd']:.0f} %"
+            )]  # fmt: skip
+        else:
+            report["warnings"] = [*report.get("warnings", []), face_scale["error"]]
     write_json(out / "report.json", report)
+    return rec
+
+
+#: :func:`poses` with ``scale_from_faces``: faces are searched on up to this many stretches
+#: of consecutive posed instants, spread evenly over the videos ...
+FACE_SCALE_BLOCKS = 12
+#: ... of this many instants each (tracks need consecutive instants to link and to measure
+#: a face's eyes at least 3 times)
+FACE_SCALE_BLOCK = 10
+FACE_SCALE_FILE = "face_scale.json"
+
+
+def _with_scale(rec: VideoReconstruction, s: float) -> VideoReconstruction:
+    """``rec`` (in its map's unit) in metres, ``s`` metres per map unit."""
+    cams = {n: c.scaled(s) for n, c in rec.cameras.items()}
+    return replace(rec, cameras=cams, points=np.asarray(rec.points) * s, scale=float(s))
+
+
+def _face_scale(
+    rec: VideoReconstruction,
+    videos: Sequence[str | os.PathLike[str]],
+    cache: Path,
+    key: str,
+    interocular: float,
+    progress: bool,
+) -> dict[str, Any]:
+    """The metric scale of ``rec`` from the faces on a sample of its posed instants
+    (cached in ``cache/FACE_SCALE_FILE`` under ``key`` and ``interocular``): a report entry
+    with ``metres_per_unit``, or with ``error``."""
+    from socialcam.errors import DegenerateError
+
+    path = cache / FACE_SCALE_FILE
+    if path.is_file():
+        stored = json.loads(path.read_text())
+        if stored.get("key") == key and stored.get("interocular") == interocular:
+            return dict(stored["result"])
+    times = np.unique(
+        np.round(np.concatenate([np.asarray(c.times) for c in rec.cameras.values()]), 6)
+    )
+    n_block = min(FACE_SCALE_BLOCKS, max(1, len(times) // FACE_SCALE_BLOCK))
+    starts = np.linspace(0, max(0, len(times) - FACE_SCALE_BLOCK), n_block).round().astype(int)
+    keep = np.unique(np.concatenate([times[a : a + FACE_SCALE_BLOCK] for a in starts]))
+    sample = {}
+    for n, c in rec.cameras.items():
+        sel = np.flatnonzero(np.isin(np.round(np.asarray(c.times), 6), keep))
+        if len(sel):
+            sample[n] = c[sel]
+    offsets = {n: float(rec.offsets[i]) for i, n in enumerate(rec.names)}
+    result: dict[str, Any] = {"interocular_m": interocular, "instants_searched": len(keep)}
+    try:
+        found = faces_in_videos(
+            [v for v in videos if Path(v).stem in sample], sample, offsets=offsets,
+            interocular=interocular, progress=progress,
+        )  # fmt: skip
+        fs = found.scale
+        result.update(
+            metres_per_unit=fs.metres_per_unit,
+            relative_sd=fs.relative_sd,
+            people_measured=len(fs.person),
+            interocular_measured_m=fs.interocular.tolist(),
+        )
+    except DegenerateError as exc:
+        result["error"] = f"scale_from_faces: {exc}; the map's own unit is kept"
+    except ValueError as exc:  # e.g. fewer than two posed wearers
+        result["error"] = f"scale_from_faces: {exc}; the map's own unit is kept"
+    write_json(path, {"key": key, "interocular": interocular, "result": result})
+    return result
+
+
+def load_poses(run_dir: str | os.PathLike[str]) -> VideoReconstruction:
+    """The poses of a folder written by :func:`poses` or :func:`run` as its results use
+    them: ``cache/sfm``, in metres by the scale the run measured on faces
+    (``scale_from_faces``) where the map had none."""
+    cache = Path(run_dir) / "cache" / "sfm"
+    rec = VideoReconstruction.load(cache)
+    path = cache / FACE_SCALE_FILE
+    key_file = cache / "key.txt"
+    if not np.isfinite(rec.scale) and path.is_file() and key_file.is_file():
+        stored = json.loads(path.read_text())
+        if stored.get("key") == key_file.read_text().strip():
+            s = stored.get("result", {}).get("metres_per_unit")
+            if s is not None:
+                rec = _with_scale(rec, float(s))
     return rec
 
 
@@ -1002,6 +1116,7 @@ def run(
     options: RunOptions | None = None,
     overwrite: bool = False,
     progress: bool = True,
+    scale_from_faces: float | None = None,
     **overrides: Any,
 ) -> RunResult:
     """The whole chain on social-camera videos: poses → gaze calibration (Eq 3.1) → primary
@@ -1025,6 +1140,9 @@ def run(
         Wearers without one — or whose segment fails (did not fixate, implausible result,
         too few poses) — get the optical axis with ``default_h``; ``report.json`` says so.
     sync, intrinsics, known_distance, eye_height : as :func:`socialcam.sfm.reconstruct_videos`.
+    scale_from_faces : as :func:`poses`: where the poses have no metric scale, take it from
+        the faces in view (the people's eyes this many metres apart, 0.063 for adults);
+        every later stage then works in metres.
     options, **overrides : :class:`RunOptions` and field overrides.
     progress : progress bars on stderr.
 
@@ -1093,7 +1211,10 @@ def run(
             eye_height=eye_height,
             options=sfm_opts,
             progress=progress,
+            scale_from_faces=scale_from_faces,
         )
+        if scale_from_faces is not None:  # the later stages see the poses in its scale
+            key = _hash(key, {"scale_from_faces": scale_from_faces})
         poses_report = json.loads((out / "report.json").read_text())
         done("poses", t0, bool(poses_report.get("cached")))
         for n in names:
@@ -1272,6 +1393,7 @@ def run(
                 "offsets",
                 "unplaced",
                 "warnings",
+                "face_scale",
             )
         },
         "calibration": {n: stored[n]["summary"] for n in names},
@@ -2220,7 +2342,7 @@ def faces(
     missing = [v for v in videos if not os.path.exists(v)]
     if missing:
         raise ValueError(f"run_dir: the run's videos are gone: {missing[:3]}")
-    rec = VideoReconstruction.load(out / "cache" / "sfm")
+    rec = load_poses(out)
     metric = bool(np.isfinite(rec.scale))
     if not metric and interocular is None:
         raise ValueError(
@@ -2305,8 +2427,6 @@ def faces(
 
         cams = rec.cameras
         if found.scale is not None:  # the faces are in metres: so are the cameras drawn
-            cams = {
-                n: Cameras(c.K, c.R, np.asarray(c.C) * s_faces, c.times) for n, c in cams.items()
-            }
+            cams = {n: c.scaled(s_faces) for n, c in cams.items()}
         save_figure(plot_faces_top(f3, names, cams), out / "faces_top.png")
     return found, report

@@ -43,15 +43,14 @@ def write_rrd(
 
     Raises ``ValueError`` when rerun-sdk is missing or ``run_dir`` holds no finished run.
     """
-    from socialcam.pipeline import _charge_from_dict, _track_from_dict
-    from socialcam.sfm import VideoReconstruction
+    from socialcam.pipeline import _charge_from_dict, _track_from_dict, load_poses
 
     rr = _import_rerun()
     out = Path(run_dir)
     need = [out / "cache" / s for s in ("sfm", "gaze", "charges", "tracks")]
     if not all((d / "key.txt").is_file() for d in need):
         raise ValueError(f"run_dir: {out} holds no finished socialcam run (run it first)")
-    rec = VideoReconstruction.load(out / "cache" / "sfm")
+    rec = load_poses(out)
     with np.load(out / "cache" / "gaze" / "gaze.npz") as z:
         gz = {k: z[k] for k in z.files}
     times = gz["times"]
