@@ -209,12 +209,12 @@ def test_cli_run(first, scene, tmp_path, capsys, monkeypatch):
     def fake_faces(run_dir, **kw):
         seen.append((str(run_dir), kw))
         return None, {"detections": {}, "instants": 0, "wearers_found": 0, "others_found": 0,
-                      "people": []}  # fmt: skip
+                      "people": [], "scale": {"source": "run", "metres_per_unit": 1.0}}  # fmt: skip
 
     monkeypatch.setattr(socialcam.pipeline, "faces", fake_faces)
     assert main([*args, "--faces", "--no-plots"]) == 0
     assert seen == [(str(out), {"landmarks": "mtcnn", "min_face": 12.0, "plots": False,
-                                "progress": False})]  # fmt: skip
+                                "progress": False, "interocular": None})]  # fmt: skip
     assert "faces written" in capsys.readouterr().out
 
 

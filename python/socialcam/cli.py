@@ -447,8 +447,8 @@ def _faces(
             f"instants; {report['wearers_found']} wearers and {report['others_found']} "
             "people without a camera reconstructed"
         )
-        sc = report["scale"]
-        if sc["source"] == "faces":
+        sc = report.get("scale") or {}
+        if sc.get("source") == "faces":
             print(
                 f"metric scale from {sc['people_measured']} faces' eyes: "
                 f"{sc['metres_per_unit']:.4g} m per map unit (± {100 * sc['relative_sd']:.0f} % "
