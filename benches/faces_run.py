@@ -16,9 +16,11 @@ gives the error of that face scale against the truth (for runs with a metric sca
 same detections with the poses put back in map units) next to the eye-height scale's. With
 ``face_spread=X`` the people's faces differ in size (``render_scene(face_scales=...)``, eye
 distances 63 mm × N(1, X), seeded per scene; adults: X ≈ 0.06), so the face scale meets
-people's real differences; without, every face is drawn 63 mm.
+people's real differences; without, every face is drawn 63 mm. ``duration=S`` renders
+S-second clips instead of 3 (session 35: do the SfM misses of 3-s clips of a circle, where
+cameras across the circle share no view, hold on longer clips?).
 
-Run: python benches/faces_run.py OUT_DIR [seed ...] [face_spread=X]
+Run: python benches/faces_run.py OUT_DIR [seed ...] [face_spread=X] [duration=S]
 """
 
 from __future__ import annotations
@@ -68,14 +70,16 @@ def _on_truth_cameras(tr, used, dets, faces3d):
     return full, dataclasses.replace(faces3d, person=person, detection_person=tuple(dp))
 
 
-def evaluate(out: Path, seed: int, face_spread: float = 0.0) -> None:
+def evaluate(out: Path, seed: int, face_spread: float = 0.0, duration: float = 3.0) -> None:
     factors = None
     tag = ""
     if face_spread > 0:
         rng = np.random.default_rng([seed, 35])
         factors = np.clip(rng.normal(1.0, face_spread, 6), 0.7, 1.3).tolist()
         tag = f"_fs{face_spread:g}"
-    scene = render_scene(out / f"scene{seed}{tag}", n_wearers=4, n_people=2, duration=3.0,
+    if duration != 3.0:
+        tag += f"_d{duration:g}"
+    scene = render_scene(out / f"scene{seed}{tag}", n_wearers=4, n_people=2, duration=duration,
                          fps=10.0, size=(1280, 960), seed=seed, faces=True,
                          arrangement="circle", audio=False, calibration=False,
                          start_spread=0.0, progress=False, face_scales=factors)  # fmt: skip
@@ -199,11 +203,13 @@ def evaluate(out: Path, seed: int, face_spread: float = 0.0) -> None:
 def main(argv: list[str]) -> None:
     out = Path(argv[0])
     opts = dict(a.split("=", 1) for a in argv[1:] if "=" in a)
-    if set(opts) - {"face_spread"}:
-        raise SystemExit(f"unknown options {sorted(set(opts) - {'face_spread'})}")
+    known = {"face_spread", "duration"}
+    if set(opts) - known:
+        raise SystemExit(f"unknown options {sorted(set(opts) - known)}")
     spread = float(opts.get("face_spread", 0.0))
+    duration = float(opts.get("duration", 3.0))
     for seed in [int(a) for a in argv[1:] if "=" not in a] or [11]:
-        evaluate(out, seed, spread)
+        evaluate(out, seed, spread, duration)
 
 
 if __name__ == "__main__":
