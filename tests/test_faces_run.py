@@ -6,6 +6,7 @@ faces MTCNN finds in the videos' frames, against the renderer's truth."""
 from __future__ import annotations
 
 import csv
+import dataclasses
 import json
 
 import numpy as np
@@ -114,6 +115,15 @@ def test_faces_of_a_run_folder(tmp_path, scene, found, capsys):
     assert report["wearers_found"] == len(wearers) >= 3
     dis = [p["ego_exo_disagreement_deg_median"] for p in wearers if "ego_exo_instants" in p]
     assert len(dis) >= 3 and max(dis) < 10, dis
+    # the faces' eyes check the run's scale: right here (+2.9 % implied), a warning when the
+    # world is 1.5x too large (as a wrong floor makes it: seed 19 of the faces-run bench)
+    sc = report["scale"]
+    assert sc["source"] == "run" and sc["faces_measured"] >= 3 and "warning" not in sc, sc
+    assert abs(sc["implied_scale_error"]) < 0.06
+    from socialcam.pipeline import _scale_check
+
+    big = _scale_check(dataclasses.replace(f3, landmarks=f3.landmarks * 1.5))
+    assert abs(big["implied_scale_error"] + 1 / 3) < 0.05 and "off by -3" in big["warning"]
     png = run / "faces_top.png"
     assert png.read_bytes()[:8] == b"\x89PNG\r\n\x1a\n" and png.stat().st_size > 10_000
     from socialcam.viz import plot_faces_top

@@ -448,6 +448,8 @@ def _faces(
             "people without a camera reconstructed"
         )
         sc = report.get("scale") or {}
+        if sc.get("warning"):
+            print(f"warning: {sc['warning']}", file=sys.stderr)
         if sc.get("source") == "faces":
             print(
                 f"metric scale from {sc['people_measured']} faces' eyes: "

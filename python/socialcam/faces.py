@@ -1721,6 +1721,13 @@ def interocular_distances(faces: Faces3D, min_instants: int = 3) -> tuple[IntArr
     )
 
 
+def _median_relative_sd(d: FloatArray, interocular: float) -> float:
+    """Relative standard deviation of the median of the eye distances ``d``: ``1.25 ·
+    spread / √n``, the spread measured but at least the adults' (``FaceScale.relative_sd``)."""
+    spread = float(np.std(d, ddof=1) / np.mean(d)) if len(d) > 1 else 0.0
+    return float(1.2533 * max(spread, INTEROCULAR_SD / interocular) / np.sqrt(len(d)))
+
+
 @dataclass(frozen=True)
 class FaceScale:
     """A metric scale measured on the faces in view (:func:`scale_from_faces`).
@@ -1874,13 +1881,12 @@ def scale_from_faces(
             s = s * float(np.median(d)) / io_
             break
         f, cols, d = f2, cols2, d2
-    spread = float(np.std(d, ddof=1) / np.mean(d)) if len(d) > 1 else 0.0
     return (
         FaceScale(
             metres_per_unit=float(s),
             person=readonly(np.asarray(f.person)[cols].astype(np.int64)),
             interocular=d,
-            relative_sd=float(1.2533 * max(spread, INTEROCULAR_SD / io_) / np.sqrt(len(d))),
+            relative_sd=_median_relative_sd(d, io_),
             rounds=rounds,
         ),
         f,

@@ -2297,6 +2297,33 @@ def faces_csv(faces: Any, names: Sequence[str]) -> str:
     return buf.getvalue()
 
 
+def _scale_check(f3: Any, interocular: float = 0.063) -> dict[str, Any]:
+    """The faces' eyes as a check of a metric scale: the median eye distance of the faces
+    seen at 3 instants or more, the scale error it implies (``interocular / median − 1``:
+    > 0 = the world is too small) and, when that error is beyond 3 standard deviations of
+    such a median (at least 10 %), a ``warning``."""
+    from socialcam.faces import _median_relative_sd, interocular_distances
+
+    _, d = interocular_distances(f3, 3)
+    if not len(d):
+        return {"faces_measured": 0}
+    med = float(np.median(d))
+    err = interocular / med - 1.0
+    sd = _median_relative_sd(d, interocular)
+    out: dict[str, Any] = {
+        "faces_measured": len(d),
+        "interocular_median_m": med,
+        "implied_scale_error": err,
+    }
+    if abs(err) > max(0.1, 3 * sd):
+        out["warning"] = (
+            f"the faces' eyes measure {1e3 * med:.0f} mm apart on median over {len(d)} faces "
+            f"(adults: about {1e3 * interocular:.0f}): the run's metric scale may be off by "
+            f"{100 * err:+.0f} % (check eye_height / known_distance, or scale from the faces)"
+        )
+    return out
+
+
 def faces(
     run_dir: str | os.PathLike[str],
     *,
@@ -2401,7 +2428,11 @@ def faces(
                 entry["ego_exo_disagreement_deg_median"] = float(np.degrees(np.median(dis)))
         people.append(entry)
     if found.scale is None:
-        scale_info: dict[str, Any] = {"source": "run", "metres_per_unit": float(rec.scale)}
+        scale_info: dict[str, Any] = {
+            "source": "run",
+            "metres_per_unit": float(rec.scale),
+            **_scale_check(f3),
+        }
     else:
         fs = found.scale
         scale_info = {
