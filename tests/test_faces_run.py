@@ -124,6 +124,28 @@ def test_faces_of_a_run_folder(tmp_path, scene, found, capsys):
 
     big = _scale_check(dataclasses.replace(f3, landmarks=f3.landmarks * 1.5))
     assert abs(big["implied_scale_error"] + 1 / 3) < 0.05 and "off by -3" in big["warning"]
+    # the wearers' faces are where their cameras are (true poses: measured 100 % here)
+    pc = report["pose_check"]
+    assert pc["expected_sightings"] >= 20 and pc["fraction"] >= 0.9 and "warning" not in pc, pc
+    # red: two wearers' cameras turned 35 deg about the circle's centre, as SfM can join them
+    from socialcam.faces import wearer_sightings
+
+    tr = scene.truth
+    cams = [tr.cameras(v) for v in range(len(tr.names))]
+    centre = np.mean([c.C.mean(axis=0) for c in cams], axis=0)
+    a = np.radians(35.0)
+    Rz = np.array([[np.cos(a), -np.sin(a), 0], [np.sin(a), np.cos(a), 0], [0, 0, 1.0]])
+    bad = [c if v < 2 else Cameras(c.K, c.R @ Rz.T, (c.C - centre) @ Rz.T + centre, c.times)
+           for v, c in enumerate(cams)]  # fmt: skip
+    e0, f0 = wearer_sightings(list(found.detections), cams)
+    e1, f1 = wearer_sightings(list(found.detections), bad)
+
+    def flagged(e, f):
+        return int(((e >= 5) & (f < 0.5 * e)).sum())
+
+    # measured 56 of 56 (no pair flagged) and 7 of 103 (seed 4: 68 of 70, 44 of 67)
+    assert f0.sum() >= 0.9 * e0.sum() and flagged(e0, f0) == 0, (e0, f0)
+    assert flagged(e1, f1) >= 1 and f1.sum() < 0.5 * e1.sum(), (e1, f1)
     png = run / "faces_top.png"
     assert png.read_bytes()[:8] == b"\x89PNG\r\n\x1a\n" and png.stat().st_size > 10_000
     from socialcam.viz import plot_faces_top

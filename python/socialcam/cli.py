@@ -448,8 +448,9 @@ def _faces(
             "people without a camera reconstructed"
         )
         sc = report.get("scale") or {}
-        if sc.get("warning"):
-            print(f"warning: {sc['warning']}", file=sys.stderr)
+        for part in (sc, report.get("pose_check") or {}):
+            if part.get("warning"):
+                print(f"warning: {part['warning']}", file=sys.stderr)
         if sc.get("source") == "faces":
             print(
                 f"metric scale from {sc['people_measured']} faces' eyes: "

@@ -1698,6 +1698,78 @@ def reconstruct_faces(
     )
 
 
+def wearer_sightings(
+    detections: Sequence[FaceDetections],
+    cameras: Sequence[Any],
+    *,
+    facing: float = 60.0,
+    min_face: float = 12.0,
+    reach: float = 1.5,
+    face_width: float = 0.13,
+) -> tuple[IntArray, IntArray]:
+    """How often the cameras see each other's wearers where their poses say they should: a
+    check of the cameras' RELATIVE poses by the faces (no unit needed). Entry ``[i, j]``
+    of ``expected`` counts the instants where camera ``j``'s centre projects inside camera
+    ``i``'s image, in front of it, with ``j`` turned towards ``i`` (its optical axis within
+    ``facing`` degrees of the direction to ``i``: its face is then towards ``i``) and at a
+    size of at least ``min_face`` pixels (a frontal face ``face_width`` wide, in the
+    cameras' unit: give it in map units when the map has no scale); ``found`` counts those
+    where a detection's eye midpoint lies within ``reach`` face sizes of that projection (a
+    head camera sits just above the eyes). Cameras registered wrongly relative to each
+    other expect faces where there are none: measured on a rendered circle (8 s, 4 wearers)
+    whose SfM map joined two pairs of wearers 35° apart, pairs across the seam found 0 of
+    20 and 0 of 14 expected sightings; with the true poses of the same frames, 304 of 306.
+    On rendered circles (2 s) with true poses 56 of 56 and 68 of 70; with two of the four
+    cameras turned 35° about the circle's centre, 7 of 103 and 44 of 67, a pair at 0 of 20
+    in each.
+
+    Returns ``(expected, found)``, both ``(V, V)`` counts.
+    """
+    if isinstance(detections, FaceDetections) or not isinstance(detections, Sequence):
+        raise ValueError("detections: expected one FaceDetections per camera")
+    V = len(detections)
+    if len(cameras) != V:
+        raise ValueError(f"cameras: expected {V} Cameras (one per camera), got {len(cameras)}")
+    for name, val in (("facing", facing), ("min_face", min_face), ("reach", reach),
+                      ("face_width", face_width)):  # fmt: skip
+        check_float(val, name, min=0.0, min_exclusive=True)
+    for v, c in enumerate(cameras):
+        if getattr(c, "times", None) is None:
+            raise ValueError(f"cameras[{v}]: needs times (the common clock) to match instants")
+    _, frames = _instants(cameras, None)
+    cos_f = np.cos(np.radians(facing))
+    expected = np.zeros((V, V), np.int64)
+    found = np.zeros((V, V), np.int64)
+    mids = [0.5 * (d.landmarks[:, 0] + d.landmarks[:, 1]) for d in detections]
+    sizes = [np.sqrt(d.box[:, 2] * d.box[:, 3]) for d in detections]
+    for i in range(V):
+        w, h = detections[i].size
+        for t in np.flatnonzero(frames[i] >= 0):
+            k = frames[i][t]
+            K, R, Ci = cameras[i].K[k], cameras[i].R[k], cameras[i].C[k]
+            here = np.flatnonzero(detections[i].frame == k)
+            for j in range(V):
+                kj = frames[j][t]
+                if j == i or kj < 0:
+                    continue
+                Cj = cameras[j].C[kj]
+                x = R @ (Cj - Ci)
+                if x[2] <= 0:
+                    continue
+                u = K[:2, :2] @ (x[:2] / x[2]) + K[:2, 2]
+                if not (0 <= u[0] < w and 0 <= u[1] < h):
+                    continue
+                to_i = (Ci - Cj) / np.linalg.norm(Ci - Cj)
+                if cameras[j].R[kj][2] @ to_i < cos_f or K[0, 0] * face_width / x[2] < min_face:
+                    continue
+                expected[i, j] += 1
+                if len(here):
+                    dist = np.linalg.norm(mids[i][here] - u, axis=1)
+                    if (dist <= reach * sizes[i][here]).any():
+                        found[i, j] += 1
+    return readonly(expected), readonly(found)
+
+
 # ----------------------------------------------------------------------------- metric scale
 #: metres: mean interpupillary distance of adults (about 63 mm; women's a little smaller,
 #: men's a little larger); the shipped face photographs are drawn at this distance

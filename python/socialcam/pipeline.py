@@ -2361,7 +2361,7 @@ def faces(
     socialcam.errors.DegenerateError
         With ``interocular``, no face seen by two cameras at once to measure.
     """
-    from socialcam.faces import fuse_ego_exo, interocular_distances
+    from socialcam.faces import fuse_ego_exo, interocular_distances, wearer_sightings
 
     check_bool(plots, "plots")
     out = Path(run_dir)
@@ -2442,9 +2442,35 @@ def faces(
             "people_measured": len(fs.person),
             "relative_sd": fs.relative_sd,
         }
+    # the wearers' faces where their cameras are: a check of the relative poses
+    unit = 1.0 if found.scale is None else 1.0 / float(found.scale.metres_per_unit)
+    expected, seen = wearer_sightings(
+        list(found.detections), [rec.cameras[n] for n in names], min_face=min_face,
+        face_width=0.13 * unit,
+    )  # fmt: skip
+    n_exp, n_seen = int(expected.sum()), int(seen.sum())
+    pose_check: dict[str, Any] = {
+        "expected_sightings": n_exp,
+        "found": n_seen,
+        "fraction": n_seen / n_exp if n_exp else None,
+        "pairs": {
+            f"{a} sees {b}": [int(seen[i, j]), int(expected[i, j])]
+            for i, a in enumerate(names)
+            for j, b in enumerate(names)
+            if expected[i, j]
+        },
+    }
+    off = [k for k, (f_, e_) in pose_check["pairs"].items() if e_ >= 5 and f_ < 0.5 * e_]
+    if off:
+        pose_check["warning"] = (
+            "a wearer's face was missing where its camera is in most of the views that face "
+            f"it ({', '.join(off)}): those wearers' relative poses look wrong (structure from "
+            "motion may have joined them wrongly)"
+        )
     report = {
         "landmarks": landmarks,
         "scale": scale_info,
+        "pose_check": pose_check,
         "cameras": names,
         "detections": {n: len(d) for n, d in zip(names, f3.detection_person, strict=True)},
         "associated_fraction": {
