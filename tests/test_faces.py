@@ -812,3 +812,19 @@ def test_scale_from_faces_of_people_with_different_faces(tmp_path, seed):
                                     confidence=d.confidence[:0], landmarks=d.landmarks[:0],
                                     landmark_noise=None) for d in dets]  # fmt: skip
         scale_from_faces(none, mapped)
+    # the other new functions' bad input
+    from socialcam.faces import interocular_distances, wearer_sightings
+
+    with pytest.raises(ValueError, match="faces: expected a Faces3D"):
+        interocular_distances(object())
+    with pytest.raises(ValueError, match="min_instants"):
+        interocular_distances(f3, 0)
+    with pytest.raises(ValueError, match="cameras"):
+        wearer_sightings(dets, mapped[:2])
+    with pytest.raises(ValueError, match="detections"):
+        wearer_sightings(dets[0], mapped)
+    for name in ("facing", "min_face", "reach", "face_width"):
+        with pytest.raises(ValueError, match=name):
+            wearer_sightings(dets, mapped, **{name: 0.0})
+    with pytest.raises(ValueError, match="times"):
+        wearer_sightings(dets, [Cameras(c.K, c.R, c.C) for c in mapped])

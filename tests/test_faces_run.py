@@ -254,6 +254,8 @@ def test_poses_without_metric_scale_take_it_from_the_faces(tmp_path, scene, monk
     assert not np.isfinite(pl.load_poses(run).scale)
     with pytest.raises(ValueError, match="scale_from_faces"):
         pl.poses(scene.videos, run, progress=False, scale_from_faces=-1.0)
+    with pytest.raises(ValueError, match=r"run_dir: .* holds no poses"):
+        pl.load_poses(tmp_path / "nothing")
     import importlib.util
 
     real = importlib.util.find_spec

@@ -46,6 +46,8 @@ MTCNN_SHIFT = -0.5
 #: metres: typical distance of the five landmarks from their mean (an adult face: eyes
 #: ±32 mm, mouth corners 25 mm aside and 50 mm below), the lever of a head turn
 FACE_RADIUS = 0.04
+#: metres: side of the box a detector draws around a frontal adult face
+FACE_WIDTH = 0.13
 #: metres: prior spread of a face's offset from the point its head turns about (the
 #: offset is estimated per track, from 0 with this standard deviation; the rendered heads
 #: turn about the eye centre, 58 mm behind and above the landmarks' mean; a real head
@@ -1705,7 +1707,7 @@ def wearer_sightings(
     facing: float = 60.0,
     min_face: float = 12.0,
     reach: float = 1.5,
-    face_width: float = 0.13,
+    face_width: float = FACE_WIDTH,
 ) -> tuple[IntArray, IntArray]:
     """How often the cameras see each other's wearers where their poses say they should: a
     check of the cameras' RELATIVE poses by the faces (no unit needed). Entry ``[i, j]``
@@ -1783,6 +1785,8 @@ def interocular_distances(faces: Faces3D, min_instants: int = 3) -> tuple[IntArr
     """Per tracked face seen at ``min_instants`` instants or more, the median distance
     between its two eye landmarks (the world's unit). Returns ``(columns, distances)``:
     indices into ``faces.person`` and the distances."""
+    if not isinstance(faces, Faces3D):
+        raise ValueError(f"faces: expected a Faces3D, got {type(faces).__name__}")
     check_int(min_instants, "min_instants", min=1)
     d = np.linalg.norm(faces.landmarks[:, :, 0] - faces.landmarks[:, :, 1], axis=-1)
     ok = np.isfinite(d)

@@ -261,8 +261,6 @@ def _face_scale(
     """The metric scale of ``rec`` from the faces on a sample of its posed instants
     (cached in ``cache/FACE_SCALE_FILE`` under ``key`` and ``interocular``): a report entry
     with ``metres_per_unit``, or with ``error``."""
-    from socialcam.errors import DegenerateError
-
     path = cache / FACE_SCALE_FILE
     if path.is_file():
         stored = json.loads(path.read_text())
@@ -306,7 +304,10 @@ def load_poses(run_dir: str | os.PathLike[str]) -> VideoReconstruction:
     them: ``cache/sfm``, in metres by the scale the run measured on faces
     (``scale_from_faces``) where the map had none."""
     cache = Path(run_dir) / "cache" / "sfm"
-    rec = VideoReconstruction.load(cache)
+    try:
+        rec = VideoReconstruction.load(cache)
+    except ValueError:
+        raise ValueError(f"run_dir: {run_dir} holds no poses of socialcam poses or run") from None
     path = cache / FACE_SCALE_FILE
     key_file = cache / "key.txt"
     if not np.isfinite(rec.scale) and path.is_file() and key_file.is_file():
@@ -2297,13 +2298,14 @@ def faces_csv(faces: Any, names: Sequence[str]) -> str:
     return buf.getvalue()
 
 
-def _scale_check(f3: Any, interocular: float = 0.063) -> dict[str, Any]:
+def _scale_check(f3: Any, interocular: float | None = None) -> dict[str, Any]:
     """The faces' eyes as a check of a metric scale: the median eye distance of the faces
     seen at 3 instants or more, the scale error it implies (``interocular / median − 1``:
     > 0 = the world is too small) and, when that error is beyond 3 standard deviations of
     such a median (at least 10 %), a ``warning``."""
-    from socialcam.faces import _median_relative_sd, interocular_distances
+    from socialcam.faces import INTEROCULAR, _median_relative_sd, interocular_distances
 
+    interocular = INTEROCULAR if interocular is None else interocular
     _, d = interocular_distances(f3, 3)
     if not len(d):
         return {"faces_measured": 0}
@@ -2361,7 +2363,7 @@ def faces(
     socialcam.errors.DegenerateError
         With ``interocular``, no face seen by two cameras at once to measure.
     """
-    from socialcam.faces import fuse_ego_exo, interocular_distances, wearer_sightings
+    from socialcam.faces import FACE_WIDTH, fuse_ego_exo, interocular_distances, wearer_sightings
 
     check_bool(plots, "plots")
     out = Path(run_dir)
@@ -2446,7 +2448,7 @@ def faces(
     unit = 1.0 if found.scale is None else 1.0 / float(found.scale.metres_per_unit)
     expected, seen = wearer_sightings(
         list(found.detections), [rec.cameras[n] for n in names], min_face=min_face,
-        face_width=0.13 * unit,
+        face_width=FACE_WIDTH * unit,
     )  # fmt: skip
     n_exp, n_seen = int(expected.sum()), int(seen.sum())
     pose_check: dict[str, Any] = {
