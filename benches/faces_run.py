@@ -18,9 +18,12 @@ same detections with the poses put back in map units) next to the eye-height sca
 distances 63 mm × N(1, X), seeded per scene; adults: X ≈ 0.06), so the face scale meets
 people's real differences; without, every face is drawn 63 mm. ``duration=S`` renders
 S-second clips instead of 3 (session 35: do the SfM misses of 3-s clips of a circle, where
-cameras across the circle share no view, hold on longer clips?).
+cameras across the circle share no view, hold on longer clips?). ``calibrated=1`` gives the run
+each wearer's lens (the renderer's K, no distortion) and keeps it fixed
+(``refine_intrinsics=False``), as a user who calibrated the head cameras would (session 36:
+are the 3-s misses SfM's self-calibration, a map bent by a wrong focal length?).
 
-Run: python benches/faces_run.py OUT_DIR [seed ...] [face_spread=X] [duration=S]
+Run: python benches/faces_run.py OUT_DIR [seed ...] [face_spread=X] [duration=S] [calibrated=1]
 """
 
 from __future__ import annotations
@@ -70,7 +73,9 @@ def _on_truth_cameras(tr, used, dets, faces3d):
     return full, dataclasses.replace(faces3d, person=person, detection_person=tuple(dp))
 
 
-def evaluate(out: Path, seed: int, face_spread: float = 0.0, duration: float = 3.0) -> None:
+def evaluate(
+    out: Path, seed: int, face_spread: float = 0.0, duration: float = 3.0, calibrated: bool = False
+) -> None:
     factors = None
     tag = ""
     if face_spread > 0:
@@ -86,7 +91,11 @@ def evaluate(out: Path, seed: int, face_spread: float = 0.0, duration: float = 3
     tr = scene.truth
     names = list(tr.names)
     eye = float(np.mean([tr.C[v][:, 2].mean() for v in range(len(names))]))
-    folder = out / f"run{seed}{tag}"
+    folder = out / f"run{seed}{tag}{'_cal' if calibrated else ''}"
+    lens = {}
+    if calibrated:  # the renderer's lens (pinhole), fixed in bundle adjustment
+        lens = {"intrinsics": {n: (tr.K[v], [0.0]) for v, n in enumerate(names)},
+                "refine_intrinsics": False}  # fmt: skip
     with warnings.catch_warnings():
         warnings.simplefilter("ignore", RunWarning)  # no calibration segment: optical axis
         res = run(
@@ -99,6 +108,7 @@ def evaluate(out: Path, seed: int, face_spread: float = 0.0, duration: float = 3
             plots=False,
             overlays=False,
             num_threads=1,
+            **lens,
         )  # fmt: skip  (one thread: the same poses on every run)
     try:  # a run without a metric scale takes it from the faces' eyes
         vf, report = faces(folder, progress=False, interocular=INTEROCULAR)
@@ -203,13 +213,14 @@ def evaluate(out: Path, seed: int, face_spread: float = 0.0, duration: float = 3
 def main(argv: list[str]) -> None:
     out = Path(argv[0])
     opts = dict(a.split("=", 1) for a in argv[1:] if "=" in a)
-    known = {"face_spread", "duration"}
+    known = {"face_spread", "duration", "calibrated"}
     if set(opts) - known:
         raise SystemExit(f"unknown options {sorted(set(opts) - known)}")
     spread = float(opts.get("face_spread", 0.0))
     duration = float(opts.get("duration", 3.0))
+    calibrated = opts.get("calibrated", "0") not in ("0", "")
     for seed in [int(a) for a in argv[1:] if "=" not in a] or [11]:
-        evaluate(out, seed, spread, duration)
+        evaluate(out, seed, spread, duration, calibrated)
 
 
 if __name__ == "__main__":
