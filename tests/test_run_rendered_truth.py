@@ -233,3 +233,10 @@ def test_run_poses_at_its_output_rate(tmp_path, monkeypatch):
     assert seen["options"].num_threads == 1
     with pytest.raises(ValueError, match="num_threads"):
         pipeline.RunOptions(num_threads=0)
+    # a calibrated lens can be kept fixed (the default lets bundle adjustment refine it)
+    assert seen["options"].refine_intrinsics is True
+    with pytest.raises(ValueError, match="stop here"):
+        pipeline.run([video], tmp_path / "out2", refine_intrinsics=False, progress=False)
+    assert seen["options"].refine_intrinsics is False
+    with pytest.raises(ValueError, match="refine_intrinsics"):
+        pipeline.RunOptions(refine_intrinsics="no")

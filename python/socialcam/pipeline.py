@@ -354,6 +354,8 @@ class RunOptions:
         time; at 0.4 the run's calibration and joint attention stayed the same (seed 2: v
         within 0.01°, p within 0.1 cm) and issue 9's pose targets held on seeds 5-7 (worst
         centre 45 mm against 10 cm; median ≤ 1 mm).
+    refine_intrinsics : with given ``intrinsics``, let bundle adjustment refine them (as
+        :class:`socialcam.sfm.VideoSfmOptions`); ``False`` keeps a calibrated lens fixed.
     num_threads : threads for SIFT, matching and mapping (as
         :class:`socialcam.sfm.VideoSfmOptions`). COLMAP's results depend on thread
         scheduling: with 1 the same videos give bit-identical poses (and so the same run);
@@ -533,6 +535,7 @@ class RunOptions:
     keyframe_fps: float = 1.0
     keyframe_overlap: float = 0.4
     camera_model: str = "SIMPLE_RADIAL"
+    refine_intrinsics: bool = True
     seed: int = 0
     num_threads: int = 2
     default_h: float = DEFAULT_H
@@ -595,6 +598,7 @@ class RunOptions:
             "dense_calibration",
             "charges_in_calibration",
             "charge_faces",
+            "refine_intrinsics",
         ):
             if not isinstance(getattr(self, name), (bool, np.bool_)):
                 raise ValueError(f"{name}: expected True or False, got {getattr(self, name)!r}")
@@ -1203,6 +1207,7 @@ def run(
                 "keyframe_fps": opts.keyframe_fps,
                 "keyframe_overlap": opts.keyframe_overlap,
                 "camera_model": opts.camera_model,
+                "refine_intrinsics": opts.refine_intrinsics,
                 "seed": opts.seed,
                 "num_threads": opts.num_threads,
             },
