@@ -411,7 +411,9 @@ def _scale_from_faces_option(parser: argparse.ArgumentParser) -> None:
         metavar="METRES",
         help="where the poses have no metric scale (no --known-distance, no floor found "
         "for --eye-height), take it from the faces in view, the people's eyes METRES apart "
-        f"on median (default {INTEROCULAR}, adults; needs the faces extra)",
+        f"on median (default {INTEROCULAR}, adults; needs the faces extra); poses and "
+        "run also check an --eye-height scale by the faces and use theirs where the two "
+        "disagree beyond their error bars (a floor found at a wrong layer)",
     )
 
 

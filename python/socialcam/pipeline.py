@@ -145,7 +145,13 @@ def poses(
         report's ``face_scale`` gives the scale, its expected error and the faces measured;
         ``cache/sfm`` keeps the map's own unit and ``face_scale.json`` the scale
         (:func:`load_poses` applies it). No face to measure leaves the map's unit, with a
-        warning.
+        warning. Where ``eye_height`` gave a scale, the faces check it: a floor found at
+        the wrong layer of map points gives a scale tens of per cent off (measured: +52 and
+        +77 % on 2 of 11 rendered 3-s circles, where the faces erred +5.6 and −2.1 %), so
+        when the two disagree beyond ``max(10 %, 3 σ)`` (σ combines the faces' error and
+        the spread of people's eye heights, ``EYE_HEIGHT_SD``), the faces' scale replaces
+        it, with a warning. A ``known_distance`` (a measurement) is kept; a disagreement is
+        only warned about.
     """
     opts = _options(options, {**overrides, "fps": fps})
     _check_video_args(videos, out_dir, sync, intrinsics, known_distance, eye_height, progress)
@@ -195,9 +201,14 @@ def poses(
     face_scale: dict[str, Any] | None = None
     if scale_from_faces is None:  # the poses stay in the map's unit: so must load_poses
         (cache / FACE_SCALE_FILE).unlink(missing_ok=True)
-    elif not np.isfinite(rec.scale):
-        face_scale = _face_scale(rec, videos, cache, key, scale_from_faces, progress)
-        if "metres_per_unit" in face_scale:
+    else:
+        source = (
+            "none" if not np.isfinite(rec.scale)
+            else "known_distance" if known_distance is not None
+            else "eye_height"
+        )  # fmt: skip
+        face_scale = _face_scale(rec, videos, cache, key, scale_from_faces, progress, source)
+        if face_scale.get("applied"):
             rec = _with_scale(rec, face_scale["metres_per_unit"])
     atomic_write_bytes(out / "poses.csv", poses_csv(rec).encode())
     sync_out = {
@@ -223,14 +234,17 @@ def poses(
     }
     if face_scale is not None:
         report["face_scale"] = face_scale
-        if "metres_per_unit" in face_scale:
+        if "metres_per_unit" not in face_scale:
+            report["warnings"] = [*report.get("warnings", []), face_scale["error"]]
+        elif face_scale.get("check") is not None:
+            if "warning" in face_scale["check"]:
+                report["warnings"] = [*report.get("warnings", []), face_scale["check"]["warning"]]
+        else:
             report["warnings"] = [*report.get("warnings", []), (
                 f"metric scale from {face_scale['people_measured']} faces' eyes (assumed "
                 f"{1e3 * face_scale['interocular_m']:.0f} mm apart): {face_scale['metres_per_unit']:.4g} m "
                 f"per map unit, ± {100 * face_scale['relative_sd']:.0f} %"
             )]  # fmt: skip
-        else:
-            report["warnings"] = [*report.get("warnings", []), face_scale["error"]]
     write_json(out / "report.json", report)
     return rec
 
@@ -242,12 +256,44 @@ FACE_SCALE_BLOCKS = 12
 #: a face's eyes at least 3 times)
 FACE_SCALE_BLOCK = 10
 FACE_SCALE_FILE = "face_scale.json"
+#: Relative spread of a group's mean eye height about the figure a user gives as
+#: ``eye_height`` (adults' eye heights spread by about 7 cm in 1.6 m, and the figure is
+#: itself a guess): the eye-height scale's own error, next to the faces', when
+#: :func:`poses` checks one scale by the other.
+EYE_HEIGHT_SD = 0.05
 
 
 def _with_scale(rec: VideoReconstruction, s: float) -> VideoReconstruction:
-    """``rec`` (in its map's unit) in metres, ``s`` metres per map unit."""
+    """``rec`` scaled by ``s``: in metres when it was in its map's unit (``s`` metres per
+    map unit), or rescaled when it was metric (``scale`` becomes ``scale × s``)."""
     cams = {n: c.scaled(s) for n, c in rec.cameras.items()}
-    return replace(rec, cameras=cams, points=np.asarray(rec.points) * s, scale=float(s))
+    unit = float(s) * (float(rec.scale) if np.isfinite(rec.scale) else 1.0)
+    return replace(rec, cameras=cams, points=np.asarray(rec.points) * s, scale=unit)
+
+
+def _check_scale(result: dict[str, Any], source: str) -> None:
+    """Adds to a face-scale ``result`` measured on a metric map (``source`` of its scale:
+    ``eye_height`` or ``known_distance``) the ``check`` of that scale: the factor the faces
+    give (``metres_per_unit``: 1 when they agree), the bound ``max(10 %, 3 σ)`` it is held
+    to (σ: the faces' ``relative_sd`` and, for an eye-height scale, ``EYE_HEIGHT_SD``), and
+    whether the faces' scale replaces it (``applied``: an eye-height scale beyond the bound)."""
+    f = float(result["metres_per_unit"])
+    sd = float(result["relative_sd"])
+    if source == "eye_height":
+        sd = float(np.hypot(sd, EYE_HEIGHT_SD))
+    bound = max(0.1, 3.0 * sd)
+    off = abs(np.log(f)) > np.log1p(bound)
+    check: dict[str, Any] = {"source": source, "factor": f, "bound": bound}
+    result["applied"] = bool(off and source == "eye_height")
+    if off:
+        check["warning"] = (
+            f"the faces' eyes ({result['people_measured']} people, assumed "
+            f"{1e3 * result['interocular_m']:.0f} mm apart) put the {source} scale "
+            f"{100 * (1 / f - 1):+.0f} % off (bound ± {100 * bound:.0f} %): "
+            + ("the floor was probably found at a wrong layer of map points; the faces' "
+               "scale is used" if result["applied"] else "check the known distance")
+        )  # fmt: skip
+    result["check"] = check
 
 
 def _face_scale(
@@ -257,15 +303,22 @@ def _face_scale(
     key: str,
     interocular: float,
     progress: bool,
+    source: str = "none",
 ) -> dict[str, Any]:
     """The metric scale of ``rec`` from the faces on a sample of its posed instants
     (cached in ``cache/FACE_SCALE_FILE`` under ``key`` and ``interocular``): a report entry
-    with ``metres_per_unit``, or with ``error``."""
+    with ``metres_per_unit`` (metres per unit of ``rec``: per map unit, or per metre of a
+    metric ``rec``), ``applied`` (whether :func:`poses` scales ``rec`` by it) and, on a
+    metric ``rec`` (``source`` of its scale: ``eye_height``, ``known_distance``), the
+    ``check`` of :func:`_check_scale`; or with ``error``."""
     path = cache / FACE_SCALE_FILE
     if path.is_file():
         stored = json.loads(path.read_text())
         if stored.get("key") == key and stored.get("interocular") == interocular:
-            return dict(stored["result"])
+            cached: dict[str, Any] = dict(stored["result"])
+            if "metres_per_unit" in cached and "applied" not in cached:  # before checks
+                cached["applied"] = source == "none"
+            return cached
     times = np.unique(
         np.round(np.concatenate([np.asarray(c.times) for c in rec.cameras.values()]), 6)
     )
@@ -290,7 +343,10 @@ def _face_scale(
             relative_sd=fs.relative_sd,
             people_measured=len(fs.person),
             interocular_measured_m=fs.interocular.tolist(),
+            applied=source == "none",
         )
+        if source != "none":
+            _check_scale(result, source)
     except ValueError as exc:  # no face to measure, fewer than two posed wearers, no extra
         result["error"] = f"scale_from_faces: {exc}; the map's own unit is kept"
         if not isinstance(exc, DegenerateError):  # not a property of the videos: try again
@@ -310,11 +366,12 @@ def load_poses(run_dir: str | os.PathLike[str]) -> VideoReconstruction:
         raise ValueError(f"run_dir: {run_dir} holds no poses of socialcam poses or run") from None
     path = cache / FACE_SCALE_FILE
     key_file = cache / "key.txt"
-    if not np.isfinite(rec.scale) and path.is_file() and key_file.is_file():
+    if path.is_file() and key_file.is_file():
         stored = json.loads(path.read_text())
         if stored.get("key") == key_file.read_text().strip():
-            s = stored.get("result", {}).get("metres_per_unit")
-            if s is not None:
+            result = stored.get("result", {})
+            s = result.get("metres_per_unit")
+            if s is not None and result.get("applied", not np.isfinite(rec.scale)):
                 rec = _with_scale(rec, float(s))
     return rec
 
