@@ -22,8 +22,10 @@ cameras across the circle share no view, hold on longer clips?). ``calibrated=1`
 each wearer's lens (the renderer's K, no distortion) and keeps it fixed
 (``refine_intrinsics=False``), as a user who calibrated the head cameras would (session 36:
 are the 3-s misses SfM's self-calibration, a map bent by a wrong focal length?).
+``same_lens=1`` runs SfM with one lens estimated from all videos (``same_lens``; the
+renderer's wearers' focal lengths differ by up to ±3 %, more than same-model cameras do).
 
-Run: python benches/faces_run.py OUT_DIR [seed ...] [face_spread=X] [duration=S] [calibrated=1]
+Run: python benches/faces_run.py OUT_DIR [seed ...] [face_spread=X] [duration=S] [calibrated=1] [same_lens=1]
 """
 
 from __future__ import annotations
@@ -74,7 +76,12 @@ def _on_truth_cameras(tr, used, dets, faces3d):
 
 
 def evaluate(
-    out: Path, seed: int, face_spread: float = 0.0, duration: float = 3.0, calibrated: bool = False
+    out: Path,
+    seed: int,
+    face_spread: float = 0.0,
+    duration: float = 3.0,
+    calibrated: bool = False,
+    same_lens: bool = False,
 ) -> None:
     factors = None
     tag = ""
@@ -91,11 +98,11 @@ def evaluate(
     tr = scene.truth
     names = list(tr.names)
     eye = float(np.mean([tr.C[v][:, 2].mean() for v in range(len(names))]))
-    folder = out / f"run{seed}{tag}{'_cal' if calibrated else ''}"
-    lens = {}
+    folder = out / f"run{seed}{tag}{'_cal' if calibrated else ''}{'_same' if same_lens else ''}"
+    lens: dict[str, object] = {"same_lens": True} if same_lens else {}
     if calibrated:  # the renderer's lens (pinhole), fixed in bundle adjustment
-        lens = {"intrinsics": {n: (tr.K[v], [0.0]) for v, n in enumerate(names)},
-                "refine_intrinsics": False}  # fmt: skip
+        lens.update(intrinsics={n: (tr.K[v], [0.0]) for v, n in enumerate(names)},
+                    refine_intrinsics=False)  # fmt: skip
     with warnings.catch_warnings():
         warnings.simplefilter("ignore", RunWarning)  # no calibration segment: optical axis
         res = run(
@@ -213,14 +220,15 @@ def evaluate(
 def main(argv: list[str]) -> None:
     out = Path(argv[0])
     opts = dict(a.split("=", 1) for a in argv[1:] if "=" in a)
-    known = {"face_spread", "duration", "calibrated"}
+    known = {"face_spread", "duration", "calibrated", "same_lens"}
     if set(opts) - known:
         raise SystemExit(f"unknown options {sorted(set(opts) - known)}")
     spread = float(opts.get("face_spread", 0.0))
     duration = float(opts.get("duration", 3.0))
     calibrated = opts.get("calibrated", "0") not in ("0", "")
+    same_lens = opts.get("same_lens", "0") not in ("0", "")
     for seed in [int(a) for a in argv[1:] if "=" not in a] or [11]:
-        evaluate(out, seed, spread, duration, calibrated)
+        evaluate(out, seed, spread, duration, calibrated, same_lens)
 
 
 if __name__ == "__main__":

@@ -323,6 +323,11 @@ def _sfm_flags(p: argparse.ArgumentParser) -> None:
         metavar=("PERSON_A", "TIME_A", "PERSON_B", "TIME_B", "METRES"),
         help="distance between two camera centres (persons at common-clock times)",
     )
+    p.add_argument(
+        "--same-lens",
+        action="store_true",
+        help="every wearer wears the same camera model: one lens estimated from all videos",
+    )
     _scale_from_faces_option(p)
     p.add_argument("--seed", type=int, default=None, help="random seed (default: 0)")
 
@@ -370,6 +375,7 @@ def _poses(parser: argparse.ArgumentParser, args: argparse.Namespace) -> int:
             progress=sys.stderr.isatty(),
             scale_from_faces=args.scale_from_faces,
             global_mapping=args.global_mapping,
+            same_lens=args.same_lens,
             **_given(
                 args,
                 keyframe_fps="keyframe_fps",
@@ -592,6 +598,8 @@ def _run(parser: argparse.ArgumentParser, args: argparse.Namespace) -> int:
     )
     if args.no_overlays:
         options["overlays"] = False
+    if args.same_lens:
+        options["same_lens"] = True
     if args.sparse_calibration:
         options["dense_calibration"] = False
     if args.no_plots:

@@ -413,6 +413,8 @@ class RunOptions:
         centre 45 mm against 10 cm; median ≤ 1 mm).
     refine_intrinsics : with given ``intrinsics``, let bundle adjustment refine them (as
         :class:`socialcam.sfm.VideoSfmOptions`); ``False`` keeps a calibrated lens fixed.
+    same_lens : every wearer wears the same camera model: one lens for all (as
+        :class:`socialcam.sfm.VideoSfmOptions`).
     num_threads : threads for SIFT, matching and mapping (as
         :class:`socialcam.sfm.VideoSfmOptions`). COLMAP's results depend on thread
         scheduling: with 1 the same videos give bit-identical poses (and so the same run);
@@ -593,6 +595,7 @@ class RunOptions:
     keyframe_overlap: float = 0.4
     camera_model: str = "SIMPLE_RADIAL"
     refine_intrinsics: bool = True
+    same_lens: bool = False
     seed: int = 0
     num_threads: int = 2
     default_h: float = DEFAULT_H
@@ -656,6 +659,7 @@ class RunOptions:
             "charges_in_calibration",
             "charge_faces",
             "refine_intrinsics",
+            "same_lens",
         ):
             if not isinstance(getattr(self, name), (bool, np.bool_)):
                 raise ValueError(f"{name}: expected True or False, got {getattr(self, name)!r}")
@@ -1265,6 +1269,7 @@ def run(
                 "keyframe_overlap": opts.keyframe_overlap,
                 "camera_model": opts.camera_model,
                 "refine_intrinsics": opts.refine_intrinsics,
+                "same_lens": opts.same_lens,
                 "seed": opts.seed,
                 "num_threads": opts.num_threads,
             },
