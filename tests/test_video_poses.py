@@ -271,6 +271,41 @@ def test_global_mapping(scene, tmp_path, no_vocab_tree):
     assert e.scale == pytest.approx(1.0, abs=0.03), got
 
 
+def test_same_lens(scene, tmp_path, no_vocab_tree):
+    """``same_lens``: one lens estimated from every video (COLMAP's single camera), for
+    wearers with the same camera model. The renderer's wearers' focal lengths differ by up
+    to ±3 %, so the shared one is a compromise: the poses must still hold."""
+    rec = sfm.reconstruct_videos(
+        scene.videos,
+        out_dir=tmp_path / "o",
+        sync=_manual(scene.truth),
+        known_distance=_known_distance(scene.truth),
+        same_lens=True,
+        progress=False,
+        num_threads=NT,
+    )
+    Ks = [c.K[0] for c in rec.cameras.values()]
+    assert len(Ks) == 3 and all(np.array_equal(K, Ks[0]) for K in Ks)
+    f_true = scene.truth.K[:, 0, 0]
+    assert f_true.min() * 0.97 < Ks[0][0, 0] < f_true.max() * 1.03, (Ks[0][0, 0], f_true)
+    d = rec.to_dict()
+    e = pose_errors(rec, _truth_cams(scene.truth))
+    got = (d["registered_fraction"], e.to_dict())
+    assert d["registered_fraction"] >= 0.9, got
+    assert np.median(e.centre) < 0.025, got
+    assert np.degrees(np.median(e.rotation)) < 1.0, got
+    K = scene.truth.K
+    with pytest.raises(ValueError, match="same_lens: the given intrinsics differ"):
+        sfm.reconstruct_videos(
+            scene.videos,
+            out_dir=tmp_path / "x",
+            sync=_manual(scene.truth),
+            intrinsics=[(K[0], [0.0]), (K[0] * [[1.1], [1.1], [1.0]], [0.0]), None],
+            same_lens=True,
+            progress=False,
+        )
+
+
 @pytest.mark.filterwarnings("ignore::socialcam.sfm.VideoPosesWarning")
 def test_eye_height_gives_metric_scale(scene, tmp_path, no_vocab_tree):
     """Scale from the wearers' mean eye (camera) height above the floor found among the map
