@@ -98,3 +98,24 @@ def test_render_command_writes_videos_and_truth(tmp_path, capsys):
         main(["render", str(out), "--size", "big"])
     with pytest.raises(SystemExit):
         main(["render", str(out), "--wearers", "0"])
+
+
+def test_same_lens_flag_reaches_poses_and_run(tmp_path, monkeypatch):
+    """``--same-lens`` (one lens for wearers with the same camera model) is passed on by
+    ``socialcam poses`` and ``socialcam run``; without it, each wearer has its own lens."""
+    import socialcam.pipeline as pl
+
+    seen = []
+
+    def stop(*_a, **kw):
+        seen.append(kw)
+        raise ValueError("videos: stop here")
+
+    monkeypatch.setattr(pl, "poses", stop)
+    monkeypatch.setattr(pl, "run", stop)
+    video = tmp_path / "a.mp4"
+    video.write_bytes(b"")
+    for cmd in ("poses", "run"):
+        for flag, want in (([], False), (["--same-lens"], True)):
+            assert main([cmd, str(video), "--out", str(tmp_path / "o"), *flag]) == 2
+            assert seen[-1].get("same_lens", False) is want, (cmd, seen[-1])
