@@ -191,7 +191,11 @@ class VideoSfmOptions:
         videos (COLMAP's single camera), estimated from all their keyframes together. On
         short clips a wearer's own estimate can run off (measured: +10.7 % focal length
         for one of four wearers of a rendered 3-s conversation circle, which bent the map
-        by 3.6°). The videos must share a frame size; given ``intrinsics`` must agree.
+        by 3.6°; with one lens its rotations erred 0.19°). Only for cameras that are the
+        same model: on the same rendered circles, whose wearers' focal lengths differ by
+        up to ±3 %, it also made one map worse and let SfM join another wrongly
+        (``benches/faces_run.out.txt``). The videos must share a frame size; given
+        ``intrinsics`` must agree.
     global_mapping : use COLMAP's global mapper instead of the incremental one.
     refine_intrinsics : with given ``intrinsics``, let bundle adjustment refine them.
     min_inliers : fewest PnP inliers for a pose of a frame between keyframes.
