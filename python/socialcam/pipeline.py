@@ -2430,7 +2430,13 @@ def faces(
     socialcam.errors.DegenerateError
         With ``interocular``, no face seen by two cameras at once to measure.
     """
-    from socialcam.faces import FACE_WIDTH, fuse_ego_exo, interocular_distances, wearer_sightings
+    from socialcam.faces import (
+        FACE_WIDTH,
+        fuse_ego_exo,
+        interocular_distances,
+        wearer_sightings,
+        wrong_pairs,
+    )
 
     check_bool(plots, "plots")
     out = Path(run_dir)
@@ -2529,12 +2535,13 @@ def faces(
             if expected[i, j]
         },
     }
-    off = [k for k, (f_, e_) in pose_check["pairs"].items() if e_ >= 5 and f_ < 0.5 * e_]
+    off = [f"{names[i]} and {names[j]}" for i, j in wrong_pairs(expected, seen)]
     if off:
+        pose_check["wrong_pairs"] = off
         pose_check["warning"] = (
-            "a wearer's face was missing where its camera is in most of the views that face "
-            f"it ({', '.join(off)}): those wearers' relative poses look wrong (structure from "
-            "motion may have joined them wrongly)"
+            "wearers' faces were missing where their cameras are in most of the views that "
+            f"face them, both ways ({'; '.join(off)}): those wearers' relative poses look "
+            "wrong (structure from motion may have joined them wrongly)"
         )
     report = {
         "landmarks": landmarks,
