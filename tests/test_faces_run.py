@@ -269,7 +269,7 @@ def test_poses_without_metric_scale_take_it_from_the_faces(tmp_path, scene, monk
 def test_faces_check_an_eye_height_scale_and_replace_a_wrong_one(tmp_path, scene, monkeypatch):
     """``poses(..., eye_height=..., scale_from_faces=0.063)`` on a cached metric map: the
     faces check the eye-height scale. A floor found at a wrong layer of map points left
-    two of eleven rendered 3-s circles 52 and 77 % too large (``benches/faces_run.py``):
+    5 of 20 runs on rendered 3-s circles −32 to +77 % off (``benches/faces_run.py``):
     here the world is made 1.5× too large, and the faces' scale replaces it (poses.csv
     within 6 % of the truth, a warning, ``load_poses`` the same); a right scale is kept
     (within the bound: the faces measure +2.5 % on this stretch)."""

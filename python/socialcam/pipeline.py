@@ -146,8 +146,9 @@ def poses(
         ``cache/sfm`` keeps the map's own unit and ``face_scale.json`` the scale
         (:func:`load_poses` applies it). No face to measure leaves the map's unit, with a
         warning. Where ``eye_height`` gave a scale, the faces check it: a floor found at
-        the wrong layer of map points gives a scale tens of per cent off (measured: +52 and
-        +77 % on 2 of 11 rendered 3-s circles, where the faces erred +5.6 and −2.1 %), so
+        the wrong layer of map points gives a scale tens of per cent off (measured on
+        rendered 3-s circles: −32 to +77 % on 5 of 20 runs with a floor, where the faces
+        erred −2.1 to +7.8 %), so
         when the two disagree beyond ``max(10 %, 3 σ)`` (σ combines the faces' error and
         the spread of people's eye heights, ``EYE_HEIGHT_SD``), the faces' scale replaces
         it, with a warning. A ``known_distance`` (a measurement) is kept; a disagreement is
