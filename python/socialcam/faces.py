@@ -1862,7 +1862,9 @@ def rejoin_by_head_turns(
     errors inside the group remain). With detector-like landmarks from the truth on
     circles 3–12 (8 s, two of four cameras turned 35°): placed on 3 (turn within 0.4–2.3°,
     centres within 56–110 mm: the eyes are not the camera), ``None`` on 7, never wrong;
-    the same without the face's sweep and correlation tests placed circle 3 54° off.
+    never-seen circles 13–24: placed on 9 (turn error −3.2 … +4.5°, the camera's mounting
+    angle on the head), ``None`` on 3, never wrong (``benches/faces_rejoin.py``). The same
+    without the face's sweep and correlation tests placed circle 3 54° off.
     What it does not do yet: find the groups itself, or refine the placement by the
     sightings (anonymous sightings pulled it off again).
 
