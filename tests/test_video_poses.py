@@ -246,22 +246,29 @@ def test_faces_on_sfm_poses(scene, posed):
     assert np.median(err) <= 0.03, np.median(err)
 
 
+def _posed_with(scene, out, **options):
+    """``reconstruct_videos`` on the small scene with its known distance and ``options``:
+    the reconstruction, its summary, its pose errors against the truth, and both for
+    assertion messages."""
+    rec = sfm.reconstruct_videos(
+        scene.videos,
+        out_dir=out,
+        sync=_manual(scene.truth),
+        known_distance=_known_distance(scene.truth),
+        progress=False,
+        num_threads=NT,
+        **options,
+    )
+    d = rec.to_dict()
+    e = pose_errors(rec, _truth_cams(scene.truth))
+    return rec, d, e, (d["registered_fraction"], e.to_dict())
+
+
 @pytest.mark.filterwarnings("ignore::socialcam.sfm.VideoPosesWarning")
 def test_global_mapping(scene, tmp_path, no_vocab_tree):
     """COLMAP's global mapper instead of the incremental one, behind the same outlier check
     (keyframes observing too few map points are rejected) and the same frame posing."""
-    rec = sfm.reconstruct_videos(
-        scene.videos,
-        out_dir=tmp_path / "o",
-        sync=_manual(scene.truth),
-        known_distance=_known_distance(scene.truth),
-        global_mapping=True,
-        progress=False,
-        num_threads=NT,
-    )
-    d = rec.to_dict()
-    e = pose_errors(rec, _truth_cams(scene.truth))
-    got = (d["registered_fraction"], e.to_dict())
+    _rec, d, e, got = _posed_with(scene, tmp_path / "o", global_mapping=True)
     # measured on seed 0: 100 % posed, centres 7.3 mm median and 15.5 mm max, rotations
     # 0.41° median, scale 1.015
     assert d["registered_fraction"] >= 0.9, got
@@ -275,22 +282,11 @@ def test_same_lens(scene, tmp_path, no_vocab_tree):
     """``same_lens``: one lens estimated from every video (COLMAP's single camera), for
     wearers with the same camera model. The renderer's wearers' focal lengths differ by up
     to ±3 %, so the shared one is a compromise: the poses must still hold."""
-    rec = sfm.reconstruct_videos(
-        scene.videos,
-        out_dir=tmp_path / "o",
-        sync=_manual(scene.truth),
-        known_distance=_known_distance(scene.truth),
-        same_lens=True,
-        progress=False,
-        num_threads=NT,
-    )
+    rec, d, e, got = _posed_with(scene, tmp_path / "o", same_lens=True)
     Ks = [c.K[0] for c in rec.cameras.values()]
     assert len(Ks) == 3 and all(np.array_equal(K, Ks[0]) for K in Ks)
     f_true = scene.truth.K[:, 0, 0]
     assert f_true.min() * 0.97 < Ks[0][0, 0] < f_true.max() * 1.03, (Ks[0][0, 0], f_true)
-    d = rec.to_dict()
-    e = pose_errors(rec, _truth_cams(scene.truth))
-    got = (d["registered_fraction"], e.to_dict())
     assert d["registered_fraction"] >= 0.9, got
     assert np.median(e.centre) < 0.025, got
     assert np.degrees(np.median(e.rotation)) < 1.0, got
