@@ -452,6 +452,10 @@ def test_turn_rate_smooths_the_face_configuration():
         reconstruct_faces(ws[0].dets, ws[0].cams, turn_rate=0.0)
     with pytest.raises(ValueError, match="interocular"):
         reconstruct_faces(ws[0].dets, ws[0].cams, interocular=(0.08, 0.05))
+    with pytest.raises(ValueError, match="face_shape"):
+        reconstruct_faces(ws[0].dets, ws[0].cams, face_shape=(1.2, 0.6))
+    with pytest.raises(ValueError, match="face_shape"):
+        reconstruct_faces(ws[0].dets, ws[0].cams, face_shape=(0.5,))
 
 
 def test_rigid_faces_lower_the_gaze_error():

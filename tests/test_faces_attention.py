@@ -421,15 +421,20 @@ def test_faces_seen_by_one_camera_join_their_tracks(scene):
     assert np.median(r1["landmark_errors_m"][views == 1]) < 0.04
 
 
-def test_ransac_only_association_does_not_crash(scene):
-    """Without the wearers' anchors every face goes through RANSAC; on this circle a track
-    then gathers detections whose Eq 3.4 normal equations are singular (a DegenerateError
-    from the core on main before): the track keeps its Eq 3.3 landmarks instead. (RANSAC
-    alone cannot tell the people of this circle apart, see STACK: association 0.79 here.)"""
+def test_ransac_only_association_tells_the_people_apart(scene):
+    """Without the wearers' anchors every face goes through RANSAC and tracks. On this
+    circle a track used to gather detections whose Eq 3.4 normal equations are singular (a
+    DegenerateError from the core once): the track keeps its Eq 3.3 landmarks instead. And
+    a track claiming detections by distance took other people's faces (association 0.79
+    here, 0.87 / 0.84 on seeds 2 / 3) until a tracked face had to be one face: the largest
+    set of its detections that a pair of them with a face's proportions reprojects
+    (measured: 1.000 on seeds 1-3, face-instants 188 -> 177)."""
     truth = scene[0]
     dets, cams = truth_detections(truth, scale=8.0, seed=1)
     f3 = reconstruct_faces(dets, cams, anchors=False)
-    assert f3.landmarks.shape[1] > 0 and np.isfinite(f3.v[..., 0]).sum() > 100
+    assert f3.landmarks.shape[1] > 0 and np.isfinite(f3.v[..., 0]).sum() > 150
+    scaled = dataclasses.replace(truth, K=np.stack([c.K[0] for c in cams]))
+    assert faces_vs_truth(scaled, dets, f3)["association"] >= 0.97
 
 
 def test_bench_oracle_hold_means(scene):

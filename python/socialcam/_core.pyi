@@ -336,6 +336,8 @@ def face_associate(
     min_threshold: float,
     interocular_min: float,
     interocular_max: float,
+    shape_min: float = 0.5,
+    shape_max: float = 1.6,
 ) -> tuple[npt.NDArray[np.int64], npt.NDArray[np.int64], npt.NDArray[np.int64]]:
     """Eq 3.2 over instants: camera slots ``K, R (M,3,3)``, ``C (M,3)`` with their
     ``instant (M,)``; detections ``slot (N,)``, ``landmarks (N,5,2)``, ``size (N,)``; anchors

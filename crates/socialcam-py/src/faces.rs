@@ -92,7 +92,7 @@ fn detections(
 #[pyfunction]
 #[allow(clippy::too_many_arguments)]
 #[pyo3(signature = (k, r, c, instant, slot, landmarks, size, anchor_centre, anchor_slot,
-    anchor_instant, anchor_gate, rel_threshold, min_threshold, interocular_min, interocular_max))]
+    anchor_instant, anchor_gate, rel_threshold, min_threshold, interocular_min, interocular_max, shape_min=0.5, shape_max=1.6))]
 fn face_associate<'py>(
     py: Python<'py>,
     k: PyReadonlyArray3<'py, f64>,
@@ -110,6 +110,8 @@ fn face_associate<'py>(
     min_threshold: f64,
     interocular_min: f64,
     interocular_max: f64,
+    shape_min: f64,
+    shape_max: f64,
 ) -> PyResult<(
     Bound<'py, PyArray1<i64>>,
     Bound<'py, PyArray1<i64>>,
@@ -150,16 +152,23 @@ fn face_associate<'py>(
         min_threshold,
         interocular_min,
         interocular_max,
+        shape_min,
+        shape_max,
     ];
-    if vals.iter().any(|v| !(v.is_finite() && *v >= 0.0)) || interocular_min >= interocular_max {
+    if vals.iter().any(|v| !(v.is_finite() && *v >= 0.0))
+        || interocular_min >= interocular_max
+        || shape_min >= shape_max
+    {
         return Err(PyValueError::new_err(
-            "options: thresholds must be finite and ≥ 0, interocular_min < interocular_max",
+            "options: thresholds must be finite and ≥ 0, interocular_min < interocular_max, \
+             shape_min < shape_max",
         ));
     }
     let opts = AssociationOptions {
         rel_threshold,
         min_threshold,
         interocular: (interocular_min, interocular_max),
+        shape: (shape_min, shape_max),
     };
     let (group, gan, ginst) = detach(py, move || {
         socialcore::error::ensure_alloc("instant", &[n_inst], 64)?;
