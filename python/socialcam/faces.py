@@ -528,7 +528,7 @@ class FaceOptions:
         Two people each seen by one camera, whose lines of sight cross, make a phantom face
         (measured: 0.45–0.53) that a track would otherwise keep (a never-seen circle with
         SfM poses: association 0.925 → 0.991), and a track claiming by distance took other
-        people's faces (without anchors, rendered circles 1–3: 0.79–0.87 → 1.000)
+        people's faces (without anchors, rendered circles 1–3: 0.79–0.87 → 0.99–1.00)
     landmark_noise : landmark standard deviation as a fraction of the face size (Eq 3.3
         weights and the uncertainty ``h``); ``min_noise`` pixels at least. ``None``
         (default) = each camera's ``LANDMARK_NOISE[detections.landmark_source]``, the
