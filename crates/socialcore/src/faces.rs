@@ -7,7 +7,9 @@
 //!   keep the hypothesis if it reprojects and has a human interocular distance, add the
 //!   best reprojecting detection of every other camera, keep the largest group, remove it,
 //!   repeat. The hypotheses are enumerated exhaustively (deterministic; a frame has few
-//!   detections), and no two detections of one camera ever join one face.
+//!   detections), and no two detections of one camera ever join one face. A tracked face
+//!   (an anchor without a camera) keeps only the detections that make one face with a
+//!   face's proportions.
 //! - [`triangulate_faces`]: Eq 3.3, every landmark of every face by DLT then
 //!   Levenberg–Marquardt, with its standard deviation from the Gauss–Newton covariance.
 //! - [`refine_track`]: Eq 3.4 over one face track: reprojection + λ × first differences,
@@ -295,10 +297,11 @@ pub fn associate(
     // interocular distance for 10 instants, real faces 0.85–1.2), and a track claiming by
     // distance takes other people's faces. So the track keeps the largest set of its
     // detections that a pair of them with a face's proportions reprojects (within
-    // `TRACK_SLACK` × the RANSAC test); the others sit this instant out (given to RANSAC, the detections of a
-    // dropped phantom made a one-instant phantom of two other people). Only the proportions:
-    // with the interocular and turned-to tests too, real tracked faces were dropped (1.2 %
-    // of the face-instants of 24 rendered circles, and wrong pairs on two).
+    // `TRACK_SLACK` × the RANSAC test); the others sit this instant out (given to RANSAC,
+    // the detections of a dropped phantom made a one-instant phantom of two other people).
+    // Only the proportions: with the interocular and turned-to tests too, real tracked
+    // faces were dropped (1.2 % of the face-instants of 24 rendered circles, and wrong
+    // pairs on two).
     let lm = LmOptions {
         max_iterations: 20,
         rel_tol: 1e-10,
