@@ -343,7 +343,9 @@ def face_associate(
     ``instant (M,)``; detections ``slot (N,)``, ``landmarks (N,5,2)``, ``size (N,)``; anchors
     ``(A,3)`` (wearers' head cameras with their own ``anchor_slot``, or tracked faces with
     slot −1) at ``anchor_instant (A,)`` with ``anchor_gate (A,)`` metres → ``group (N,)``,
-    ``group_anchor (G,)``, ``group_instant (G,)`` (−1 = none)."""
+    ``group_anchor (G,)``, ``group_instant (G,)`` (−1 = none). ``shape_min``/``shape_max``:
+    plausible eyes-to-mouth distances over the interocular one, for RANSAC hypotheses and
+    for the detections a tracked face keeps."""
 
 def face_triangulate(
     k: npt.NDArray[np.float64],
