@@ -16,16 +16,12 @@ import time
 from pathlib import Path
 
 import numpy as np
+from scipy.spatial.transform import Rotation
 
 from socialcam import Cameras
 from socialcam.faces import rejoin_by_head_turns
 from socialcam.synth.evaluate import truth_detections
 from socialcam.synth.render import load_truth, render_scene
-
-
-def _rz(deg: float) -> np.ndarray:
-    a = np.radians(deg)
-    return np.array([[np.cos(a), -np.sin(a), 0], [np.sin(a), np.cos(a), 0], [0, 0, 1.0]])
 
 
 def evaluate(out: Path, seed: int, turns: list[float]) -> None:
@@ -40,7 +36,7 @@ def evaluate(out: Path, seed: int, turns: list[float]) -> None:
     dets, cams = truth_detections(truth, scale=4.0, seed=seed)
     centre = np.mean([c.C.mean(axis=0) for c in cams], axis=0)
     for turn in turns:
-        R = _rz(turn)
+        R = Rotation.from_euler("z", turn, degrees=True).as_matrix()
         bad = [c if v < 2 else Cameras(c.K, c.R @ R.T, (c.C - centre) @ R.T + centre, c.times)
                for v, c in enumerate(cams)]  # fmt: skip
         t0 = time.perf_counter()

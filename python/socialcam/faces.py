@@ -1273,16 +1273,18 @@ def _instants(cams: Sequence[Any], tol: float | None) -> tuple[FloatArray, list[
     if tol is None:
         steps = [np.median(np.diff(c.times)) for c in cams if len(c) > 1]
         tol = 0.5 * min(steps) if steps else 1e-3
-    frames = []
-    for c in cams:
-        ct = np.asarray(c.times, np.float64)
-        idx = np.clip(np.searchsorted(ct, times), 1, max(1, len(ct) - 1))
-        lo = np.clip(idx - 1, 0, len(ct) - 1)
-        hi = np.clip(idx, 0, len(ct) - 1)
-        best = np.where(np.abs(ct[lo] - times) <= np.abs(ct[hi] - times), lo, hi)
-        ok = np.abs(ct[best] - times) <= tol
-        frames.append(np.where(ok, best, -1).astype(np.int64))
-    return times, frames
+    return times, [_nearest_frames(c.times, times, tol) for c in cams]
+
+
+def _nearest_frames(frame_times: Any, times: FloatArray, tol: float) -> IntArray:
+    """Per time of ``times`` the index of the nearest of ``frame_times`` (sorted; the
+    earlier on a tie), −1 where it is further than ``tol``."""
+    ct = np.asarray(frame_times, np.float64)
+    idx = np.clip(np.searchsorted(ct, times), 1, max(1, len(ct) - 1))
+    lo = np.clip(idx - 1, 0, len(ct) - 1)
+    hi = np.clip(idx, 0, len(ct) - 1)
+    best = np.where(np.abs(ct[lo] - times) <= np.abs(ct[hi] - times), lo, hi)
+    return np.where(np.abs(ct[best] - times) <= tol, best, -1).astype(np.int64)
 
 
 def _anchored_reprojection_test(
@@ -1911,14 +1913,9 @@ def rejoin_by_head_turns(
             continue
         for j in group:
             c = cameras[j]
-            ct = np.asarray(c.times, np.float64)
-            idx = np.clip(np.searchsorted(ct, f3.times[seen]), 0, len(ct) - 1)
-            prev = np.clip(idx - 1, 0, len(ct) - 1)
-            idx = np.where(
-                np.abs(ct[prev] - f3.times[seen]) < np.abs(ct[idx] - f3.times[seen]), prev, idx
-            )
-            step = float(np.median(np.diff(ct))) if len(ct) > 1 else 1.0
-            ok = np.abs(ct[idx] - f3.times[seen]) <= 0.5 * step
+            step = float(np.median(np.diff(c.times))) if len(c) > 1 else 1.0
+            idx = _nearest_frames(c.times, f3.times[seen], 0.5 * step)
+            ok = idx >= 0
             if ok.sum() < min_instants:
                 continue
             axis = c.R[idx[ok], 2]
