@@ -25,7 +25,11 @@ are the 3-s misses SfM's self-calibration, a map bent by a wrong focal length?).
 ``same_lens=1`` runs SfM with one lens estimated from all videos (``same_lens``; the
 renderer's wearers' focal lengths differ by up to ±3 %, more than same-model cameras do).
 
-Run: python benches/faces_run.py OUT_DIR [seed ...] [face_spread=X] [duration=S] [calibrated=1] [same_lens=1]
+Session 38: ``pipeline.faces`` repairs a wrong join it finds (``faces.repair_joins``); the
+poses scored and aligned to the truth are then the cameras the faces were reconstructed with
+(``VideoFaces.cameras``), and a line gives the repair (``repair=0``: as before, no repair).
+
+Run: python benches/faces_run.py OUT_DIR [seed ...] [face_spread=X] [duration=S] [calibrated=1] [same_lens=1] [repair=0]
 """
 
 from __future__ import annotations
@@ -82,6 +86,7 @@ def evaluate(
     duration: float = 3.0,
     calibrated: bool = False,
     same_lens: bool = False,
+    repair: bool = True,
 ) -> None:
     factors = None
     tag = ""
@@ -118,7 +123,7 @@ def evaluate(
             **lens,
         )  # fmt: skip  (one thread: the same poses on every run)
     try:  # a run without a metric scale takes it from the faces' eyes
-        vf, report = faces(folder, progress=False, interocular=INTEROCULAR)
+        vf, report = faces(folder, progress=False, interocular=INTEROCULAR, repair=repair)
     except ValueError as exc:  # e.g. no face to measure: said, next seed
         print(f"{seed} posed {res.report['poses']['registered_fraction']:.3f}: not scored ({exc}; "
               f"run warnings: {res.report['poses']['warnings']})", flush=True)  # fmt: skip
@@ -132,6 +137,13 @@ def evaluate(
                      for n, c in rec.cameras.items()},
             points=rec.points * vf.scale.metres_per_unit,
         )  # fmt: skip
+    pc = report["pose_check"]
+    if "wrong_pairs_before_repair" in pc:  # the faces' repair of a wrong join
+        print(f"{seed} wrong pairs {pc['wrong_pairs_before_repair']}: repaired "
+              f"{[(r['wearers'], round(r['turn_deg'], 1), r['refined_by_faces']) for r in pc['repaired']]}"
+              f", unplaced {pc['unplaced']}, still wrong {pc.get('wrong_pairs', [])}", flush=True)  # fmt: skip
+    if vf.cameras is not None:  # the cameras the faces were reconstructed with (repaired)
+        rec = dataclasses.replace(rec, cameras={**rec.cameras, **vf.cameras})
     truth_cams = {n: tr.cameras(names.index(n)) for n in used}
     A, B, RA, RB = [], [], [], []
     for n in used:
@@ -220,15 +232,16 @@ def evaluate(
 def main(argv: list[str]) -> None:
     out = Path(argv[0])
     opts = dict(a.split("=", 1) for a in argv[1:] if "=" in a)
-    known = {"face_spread", "duration", "calibrated", "same_lens"}
+    known = {"face_spread", "duration", "calibrated", "same_lens", "repair"}
     if set(opts) - known:
         raise SystemExit(f"unknown options {sorted(set(opts) - known)}")
     spread = float(opts.get("face_spread", 0.0))
     duration = float(opts.get("duration", 3.0))
     calibrated = opts.get("calibrated", "0") not in ("0", "")
     same_lens = opts.get("same_lens", "0") not in ("0", "")
+    repair = opts.get("repair", "1") not in ("0", "")
     for seed in [int(a) for a in argv[1:] if "=" not in a] or [11]:
-        evaluate(out, seed, spread, duration, calibrated, same_lens)
+        evaluate(out, seed, spread, duration, calibrated, same_lens, repair)
 
 
 if __name__ == "__main__":

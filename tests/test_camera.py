@@ -143,6 +143,21 @@ def test_from_colmap_pixel_convention_and_centres(tmp_path):
     for bad in (0.0, -1.0, float("nan"), float("inf")):
         with pytest.raises(ValueError, match="s"):
             cams.scaled(bad)
+    # moved (a group of cameras put back into another frame): the moved points project
+    # where the points did, the lens kept; a reflection or NaN is refused
+    a = np.radians(30.0)
+    Rm = np.array([[np.cos(a), -np.sin(a), 0], [np.sin(a), np.cos(a), 0], [0, 0, 1.0]])
+    tm = np.array([0.5, -1.0, 0.2])
+    mv = cams.moved(Rm, tm)
+    np.testing.assert_allclose(mv.C, cams.C @ Rm.T + tm, atol=1e-12)
+    np.testing.assert_allclose(mv[1].project(Rm @ X + tm)[0], ours, atol=1e-9)
+    np.testing.assert_allclose(mv[1].undistort_points(theirs[None])[0], ours, atol=1e-6)
+    with pytest.raises(ValueError, match="R: expected a rotation"):
+        cams.moved(np.diag([1.0, 1.0, -1.0]), tm)
+    with pytest.raises(ValueError, match="t"):
+        cams.moved(Rm, [0.0, float("nan"), 0.0])
+    with pytest.raises(ValueError, match="R"):
+        cams.moved(np.eye(2), tm)
 
 
 def test_from_colmap_errors(tmp_path):

@@ -137,6 +137,20 @@ class Cameras:
         out._times = readonly(as_float_array(times, "times", (len(self),)))
         return out
 
+    def moved(self, R: npt.ArrayLike, t: npt.ArrayLike) -> Cameras:
+        """The same cameras in a world moved rigidly by ``X' = R X + t`` (``R (3, 3)`` a
+        rotation, ``t (3,)`` in the world's unit): centres ``R C + t``, world→camera
+        rotations ``Rᵢ Rᵀ``; intrinsics, lens and times kept. E.g. a group of cameras that
+        structure from motion joined wrongly, put back (``socialcam.faces.repair_joins``)."""
+        R_ = as_float_array(R, "R", (3, 3))
+        t_ = as_float_array(t, "t", (3,))
+        if not np.allclose(R_ @ R_.T, np.eye(3), atol=1e-6) or np.linalg.det(R_) < 0:
+            raise ValueError("R: expected a rotation matrix (orthonormal, det +1)")
+        out = self[:]
+        out._R = readonly(np.ascontiguousarray(self._R @ R_.T))
+        out._C = readonly(np.ascontiguousarray(self._C @ R_.T + t_))
+        return out
+
     def scaled(self, s: float) -> Cameras:
         """The same cameras in a world scaled by ``s`` about its origin (centres ``C · s``;
         intrinsics, rotations, lens and times kept): e.g. a map of unknown unit put in

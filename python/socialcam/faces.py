@@ -1840,6 +1840,27 @@ def _wrap(a: FloatArray) -> FloatArray:
     return np.asarray(np.angle(np.exp(1j * np.asarray(a))))
 
 
+def _check_groups(
+    detections: Sequence[FaceDetections],
+    cameras: Sequence[Any],
+    ref: Sequence[int],
+    group: Sequence[int],
+) -> tuple[list[int], list[int]]:
+    """Checks a reference and a group of cameras (two disjoint non-empty sets of indices)."""
+    if isinstance(detections, FaceDetections) or not isinstance(detections, Sequence):
+        raise ValueError("detections: expected one FaceDetections per camera")
+    V = len(detections)
+    if len(cameras) != V:
+        raise ValueError(f"cameras: expected {V} Cameras (one per camera), got {len(cameras)}")
+    ref, group = [int(i) for i in ref], [int(i) for i in group]
+    if not ref or not group or set(ref) & set(group) or not set(ref + group) <= set(range(V)):
+        raise ValueError(
+            f"ref, group: two disjoint non-empty sets of camera indices in 0..{V - 1}, "
+            f"got {ref} and {group}"
+        )
+    return ref, group
+
+
 def rejoin_by_head_turns(
     detections: Sequence[FaceDetections],
     cameras: Sequence[Any],
@@ -1888,17 +1909,7 @@ def rejoin_by_head_turns(
 
     Returns ``None`` when no face track matches, or the matches disagree.
     """
-    if isinstance(detections, FaceDetections) or not isinstance(detections, Sequence):
-        raise ValueError("detections: expected one FaceDetections per camera")
-    V = len(detections)
-    if len(cameras) != V:
-        raise ValueError(f"cameras: expected {V} Cameras (one per camera), got {len(cameras)}")
-    ref, group = [int(i) for i in ref], [int(i) for i in group]
-    if not ref or not group or set(ref) & set(group) or not set(ref + group) <= set(range(V)):
-        raise ValueError(
-            f"ref, group: two disjoint non-empty sets of camera indices in 0..{V - 1}, "
-            f"got {ref} and {group}"
-        )
+    ref, group = _check_groups(detections, cameras, ref, group)
     check_int(min_instants, "min_instants", min=3)
     for name, val in (("min_sweep", min_sweep), ("max_spread", max_spread), ("agree", agree),
                       ("max_offset", max_offset)):  # fmt: skip
@@ -1950,14 +1961,313 @@ def rejoin_by_head_turns(
     t = np.median(np.concatenate([pe - C @ R.T for pe, C in pairs]), axis=0)
     moved = list(cameras)
     for j in group:
-        c = cameras[j]
-        moved[j] = type(c)(c.K, c.R @ R.T, c.C @ R.T + t, c.times)
+        moved[j] = cameras[j].moved(R, t)
     return Rejoin(readonly(R), readonly(np.asarray(t)), turn, tuple(matches), tuple(moved))
 
 
 def _rotz(a: float) -> FloatArray:
     c, s = np.cos(a), np.sin(a)
     return np.array([[c, -s, 0.0], [s, c, 0.0], [0.0, 0.0, 1.0]])
+
+
+def _yaw_fit(a: FloatArray, b: FloatArray) -> tuple[float, FloatArray]:
+    """The turn about the vertical and shift ``(θ, t)`` minimising ``Σ |b − Rz(θ) a − t|²``
+    over matched points ``a, b (N, 3)`` (closed form: the centred points' plane angle)."""
+    ma, mb = a.mean(axis=0), b.mean(axis=0)
+    x, y = a - ma, b - mb
+    th = float(np.arctan2(np.sum(x[:, 0] * y[:, 1] - x[:, 1] * y[:, 0]),
+                          np.sum(x[:, 0] * y[:, 0] + x[:, 1] * y[:, 1])))  # fmt: skip
+    return th, mb - _rotz(th) @ ma
+
+
+@dataclass(frozen=True)
+class FaceAlignment:
+    """Result of :func:`align_by_faces`: the rigid motion ``X_ref = R X + t`` (a turn about
+    the vertical and a shift) that puts the group's reconstruction of the faces onto the
+    reference's.
+
+    Attributes
+    ----------
+    R : (3, 3). t : (3,) metres. turn : radians.
+    seen : ``(by the group, by the reference)``: face-instants of each side's reconstruction
+        matched to a detection of the other side's cameras. points : landmark observations
+        used. residual : median reprojection error, in units of the detector's landmark
+        noise. cameras : all cameras, the group's moved.
+    """
+
+    R: FloatArray
+    t: FloatArray
+    turn: float
+    seen: tuple[int, int]
+    points: int
+    residual: float
+    cameras: tuple[Any, ...]
+
+
+def _face_matches(
+    X: FloatArray,
+    cams: Sequence[Any],
+    dets: Sequence[FaceDetections],
+    times: FloatArray,
+    to_world: Any,
+    gate: float,
+) -> list[tuple[int, int, FloatArray, FloatArray, float]]:
+    """Per reconstructed face-instant ``X (T, J, 5, 3)`` and per camera of ``cams`` (whose
+    frame ``to_world`` maps the points into) the detection whose landmarks lie nearest the
+    projection, within ``gate`` face sizes (one detection per face and frame, nearest
+    first). Returns ``(camera, frame, points (5, 3), landmarks (5, 2), face size)``."""
+    out: list[tuple[int, int, FloatArray, FloatArray, float]] = []
+    for v, (c, d) in enumerate(zip(cams, dets, strict=True)):
+        step = float(np.median(np.diff(c.times))) if len(c) > 1 else 1.0
+        fr = _nearest_frames(c.times, times, 0.5 * step)
+        sizes = np.sqrt(d.box[:, 2] * d.box[:, 3])
+        for t in np.flatnonzero(fr >= 0):
+            k = int(fr[t])
+            here = np.flatnonzero(d.frame == k)
+            cols = np.flatnonzero(np.isfinite(X[t]).all(axis=(1, 2)))
+            if not len(here) or not len(cols):
+                continue
+            P = to_world(X[t, cols])  # (n, 5, 3)
+            x = (P - c.C[k]) @ c.R[k].T
+            front = (x[..., 2] > 0).all(axis=1)
+            uv = (x[..., :2] / np.where(x[..., 2:] > 0, x[..., 2:], 1.0)) @ c.K[k][:2, :2].T
+            uv = uv + c.K[k][:2, 2]
+            dist = np.linalg.norm(uv[:, None] - d.landmarks[here][None], axis=-1).mean(axis=-1)
+            dist = dist / sizes[here][None]
+            dist[~front] = np.inf
+            while len(dist) and dist.min() <= gate:  # one to one, nearest first
+                a, b = np.unravel_index(int(np.argmin(dist)), dist.shape)
+                out.append((v, k, X[t, cols[a]], d.landmarks[here[b]], float(sizes[here[b]])))
+                dist[a, :] = np.inf
+                dist[:, b] = np.inf
+    return out
+
+
+def align_by_faces(
+    detections: Sequence[FaceDetections],
+    cameras: Sequence[Any],
+    ref: Sequence[int],
+    group: Sequence[int],
+    *,
+    gate: float = 1.0,
+    min_points: int = 50,
+    max_turn: float = 10.0,
+    max_shift: float = 0.5,
+    face_options: FaceOptions | None = None,
+) -> FaceAlignment | None:
+    """Refines the placement of the cameras ``group`` in the frame of the cameras ``ref``
+    (after :func:`rejoin_by_head_turns`, which leaves the camera's mounting angle on the head
+    and the eyes' offset from the camera: degrees and centimetres) by the faces seen from
+    both sides.
+
+    Each side reconstructs the faces it sees with two or more of its own cameras
+    (:func:`reconstruct_faces`). The detections of the other side's cameras that lie within
+    ``gate`` face sizes of such a face's projection (the placement must already be right to
+    a fraction of a face) observe its landmarks; the turn about the vertical and the shift
+    of the group that minimise those reprojection errors (in units of the detector's
+    landmark noise, robust soft-L1 loss) are solved by least squares, the detections
+    matched again at the new placement and solved once more. Gravity is shared, so nothing
+    else moves. The correction must stay within ``max_turn`` degrees and ``max_shift``
+    metres, a refinement and not a new placement.
+
+    Returns ``None`` when fewer than ``min_points`` landmark observations are matched.
+    """
+    from scipy.optimize import least_squares  # type: ignore[import-untyped,unused-ignore]
+
+    ref, group = _check_groups(detections, cameras, ref, group)
+    for name, val in (("gate", gate), ("max_turn", max_turn), ("max_shift", max_shift)):
+        check_float(val, name, min=0.0, min_exclusive=True)
+    check_int(min_points, "min_points", min=3)
+    sides: list[tuple[FloatArray, FloatArray] | None] = []
+    for own in (ref, group):
+        if len(own) >= 2:
+            f = reconstruct_faces([detections[i] for i in own], [cameras[i] for i in own],
+                                  options=face_options)  # fmt: skip
+            sides.append((f.landmarks, f.times))
+        else:
+            sides.append(None)
+
+    def match(th: float, t: FloatArray, g: float) -> tuple[list[Any], list[Any]]:
+        Rz = _rotz(th)
+        # the ref's faces seen by the group's cameras (points taken into the group's frame)
+        a = [] if sides[0] is None else _face_matches(
+            sides[0][0], [cameras[i] for i in group], [detections[i] for i in group],
+            sides[0][1], lambda P: (P - t) @ Rz, g)  # fmt: skip
+        b = [] if sides[1] is None else _face_matches(
+            sides[1][0], [cameras[i] for i in ref], [detections[i] for i in ref],
+            sides[1][1], lambda P: P @ Rz.T + t, g)  # fmt: skip
+        return [(group[m[0]], *m[1:]) for m in a], [(ref[m[0]], *m[1:]) for m in b]
+
+    def residuals(q: FloatArray, a: list[Any], b: list[Any]) -> FloatArray:
+        Rz, t = _rotz(q[0]), q[1:]
+        res = []
+        for obs, into in ((a, lambda P: (P - t) @ Rz), (b, lambda P: P @ Rz.T + t)):
+            for v, k, X, uv, s in obs:
+                c = cameras[v]
+                x = (into(X) - c.C[k]) @ c.R[k].T
+                p = x[:, :2] / x[:, 2:] @ c.K[k][:2, :2].T + c.K[k][:2, 2]
+                sd = LANDMARK_NOISE.get(detections[v].landmark_source, 0.03) * s
+                res.append(((p - uv) / sd).ravel())
+        return np.concatenate(res) if res else np.zeros(0)
+
+    q = np.zeros(4)
+    a: list[Any] = []
+    b: list[Any] = []
+    for g in (gate, 0.5 * gate):
+        a, b = match(q[0], q[1:], g)
+        if 5 * (len(a) + len(b)) < min_points:
+            return None
+        q = least_squares(residuals, q, args=(a, b), loss="soft_l1", f_scale=3.0).x
+    if np.degrees(abs(q[0])) > max_turn or np.linalg.norm(q[1:]) > max_shift:
+        return None
+    r = np.abs(residuals(q, a, b))
+    R, t = _rotz(q[0]), q[1:]
+    moved = list(cameras)
+    for j in group:
+        moved[j] = cameras[j].moved(R, t)
+    return FaceAlignment(readonly(R), readonly(np.asarray(t)), float(q[0]),
+                         (len(a), len(b)), 5 * (len(a) + len(b)), float(np.median(r)),
+                         tuple(moved))  # fmt: skip
+
+
+@dataclass(frozen=True)
+class JoinRepair:
+    """Result of :func:`repair_joins`.
+
+    Attributes
+    ----------
+    cameras : all cameras, those of each placed group moved into the reference's frame
+    ref : the reference group (the largest set of cameras whose sightings agree)
+    placed : per group put back ``(cameras, turn, shift, refined, residual)``: the turn
+        about the vertical (radians) and the shift (m) applied, whether the faces refined
+        it (:func:`align_by_faces`), their median residual (m; NaN when not refined)
+    unplaced : the groups found wrongly joined that could not be placed (no face track
+        followed their wearers' head turns, or the sightings still contradicted the move)
+    wrong_before, wrong_after : :func:`wrong_pairs` before and after
+    """
+
+    cameras: tuple[Any, ...]
+    ref: tuple[int, ...]
+    placed: tuple[tuple[tuple[int, ...], float, FloatArray, bool, float], ...]
+    unplaced: tuple[tuple[int, ...], ...]
+    wrong_before: tuple[tuple[int, int], ...]
+    wrong_after: tuple[tuple[int, int], ...]
+
+
+def sighting_groups(expected: IntArray, found: IntArray, min_expected: int = 5) -> list[list[int]]:
+    """The cameras split into the groups that the wearers' sightings
+    (:func:`wearer_sightings`) say are posed right relative to each other.
+
+    Each direction ``i → j`` with at least ``min_expected`` expected sightings is evidence:
+    cameras in one group should find about all of them, cameras of two groups joined
+    wrongly about none. A split of a set of cameras into two is worth, over the directions
+    across it, ``Σ (expected − 2 · found)`` (positive: across it most faces are missing);
+    the best split is taken when it is worth more than nothing, and each side is split
+    again. A single pair is not trusted alone: one direction may find faces by chance where
+    a wrong pose puts another face (measured: 20 of 22 across a 35° join) while the other
+    finds none. A camera without evidence is a group of its own (nothing says where it
+    belongs). Every split of up to 16 cameras is tried; a larger set is not split. Returns
+    the groups, largest first (ties: the lowest camera first)."""
+    check_int(min_expected, "min_expected", min=1)
+    e, f = np.asarray(expected), np.asarray(found)
+    if e.shape != f.shape or e.ndim != 2 or e.shape[0] != e.shape[1]:
+        raise ValueError(
+            f"expected, found: two (V, V) arrays of one shape, got {e.shape} and {f.shape}"
+        )
+    w = np.where(e >= min_expected, e - 2.0 * f, 0.0)
+    np.fill_diagonal(w, 0.0)
+    w = w + w.T
+
+    def split(members: list[int]) -> list[list[int]]:
+        n = len(members)
+        if n < 2 or n > 16:
+            return [members]
+        sub = w[np.ix_(members, members)]
+        masks = np.arange(1, 2 ** (n - 1))
+        side = ((masks[:, None] >> np.arange(n)) & 1).astype(bool)  # True: not with the first
+        gain = np.einsum("mi,ij,mj->m", side.astype(float), sub, (~side).astype(float))
+        best = float(gain.max())
+        if best <= 0:
+            return [members]
+        m = int(np.argmax(gain))
+        a = [c for c, s in zip(members, side[m], strict=True) if not s]
+        b = [c for c, s in zip(members, side[m], strict=True) if s]
+        return split(a) + split(b)
+
+    has = (e >= min_expected) | (e >= min_expected).T
+    np.fill_diagonal(has, False)
+    some = [i for i in range(len(e)) if has[i].any()]
+    groups = (split(some) if some else []) + [[i] for i in range(len(e)) if i not in some]
+    return sorted(groups, key=lambda g: (-len(g), g[0]))
+
+
+def repair_joins(
+    detections: Sequence[FaceDetections],
+    cameras: Sequence[Any],
+    *,
+    min_face: float = 12.0,
+    face_width: float = FACE_WIDTH,
+    min_expected: int = 5,
+    refine: bool = True,
+    face_options: FaceOptions | None = None,
+) -> JoinRepair:
+    """Finds the groups of wearers whose cameras SfM joined wrongly and puts them back, by
+    the faces (cameras in metres).
+
+    The wearers' sightings (:func:`wearer_sightings`, ``min_face``, ``face_width``) split the
+    cameras into groups that agree (:func:`sighting_groups`); the largest is the reference.
+    Every other group that :func:`wrong_pairs` (``min_expected``) sets against the reference
+    is placed by its wearers' head turns (:func:`rejoin_by_head_turns`), the placement
+    refined by the faces both sides reconstruct (:func:`align_by_faces`, with ``refine``;
+    kept unrefined when the group has one camera or shares too few faces), and kept when the
+    sightings between the group and the reference then no longer contradict it. A group
+    that cannot be placed is left where it was and reported.
+    """
+    check_bool(refine, "refine")
+    expected, found = wearer_sightings(detections, cameras, min_face=min_face,
+                                       face_width=face_width)  # fmt: skip
+    before = wrong_pairs(expected, found, min_expected)
+    cams = list(cameras)
+    groups = sighting_groups(expected, found, min_expected)
+    ref = groups[0]
+    placed: list[tuple[tuple[int, ...], float, FloatArray, bool, float]] = []
+    unplaced: list[tuple[int, ...]] = []
+    for g in groups[1:]:
+        if not any((min(i, j), max(i, j)) in before for i in ref for j in g):
+            continue
+        r = rejoin_by_head_turns(detections, cams, ref, g, face_options=face_options)
+        if r is None:
+            unplaced.append(tuple(g))
+            continue
+        R, t, moved, refined, resid = r.R, r.t, list(r.cameras), False, float("nan")
+        if refine:
+            a = align_by_faces(detections, moved, ref, g, face_options=face_options)
+            if a is not None:
+                R, t = a.R @ R, a.R @ t + a.t
+                moved, refined, resid = list(a.cameras), True, a.residual
+        # kept when the faces now appear where the moved cameras say: no wrong pair across,
+        # most of the sightings across found
+        e2, f2 = wearer_sightings(detections, moved, min_face=min_face, face_width=face_width)
+        across = np.zeros((len(cams), len(cams)), bool)
+        across[np.ix_(ref, g)] = across[np.ix_(g, ref)] = True
+        evid = across & (e2 >= min_expected)
+        if (any(across[i, j] for i, j in wrong_pairs(e2, f2, min_expected))
+                or (e2[evid] - 2 * f2[evid]).sum() > 0):  # fmt: skip
+            unplaced.append(tuple(g))
+            continue
+        cams = moved
+        placed.append((tuple(g), float(np.arctan2(R[1, 0], R[0, 0])), readonly(np.asarray(t)),
+                       refined, resid))  # fmt: skip
+        ref = sorted(ref + g)
+    e2, f2 = wearer_sightings(detections, cams, min_face=min_face, face_width=face_width)
+    return JoinRepair(
+        cameras=tuple(cams),
+        ref=tuple(groups[0]),
+        placed=tuple(placed),
+        unplaced=tuple(unplaced),
+        wrong_before=tuple(before),
+        wrong_after=tuple(wrong_pairs(e2, f2, min_expected)),
+    )
 
 
 # ----------------------------------------------------------------------------- metric scale

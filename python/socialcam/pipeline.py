@@ -2219,12 +2219,15 @@ class VideoFaces:
     scale : with ``interocular``, the :class:`socialcam.faces.FaceScale` measured on the
         faces (``faces`` are then in metres: the given cameras' centres times
         ``scale.metres_per_unit``); ``None`` when the cameras were in metres already
+    cameras : per wearer of ``names`` the :class:`socialcam.Cameras` the faces were
+        reconstructed with, in metres (:func:`faces`: those of a repaired group moved)
     """
 
     faces: Any
     names: tuple[str, ...]
     detections: tuple[Any, ...]
     scale: Any = None
+    cameras: Mapping[str, Cameras] | None = None
 
 
 def faces_in_videos(
@@ -2340,8 +2343,15 @@ def faces_in_videos(
     else:
         scale = None
         faces = reconstruct_faces(dets, cams, anchors=True, options=face_options, **overrides)
+    s = 1.0 if scale is None else float(scale.metres_per_unit)
     return VideoFaces(
-        faces=faces, names=tuple(names[i] for i in use), detections=tuple(dets), scale=scale
+        faces=faces,
+        names=tuple(names[i] for i in use),
+        detections=tuple(dets),
+        scale=scale,
+        cameras={
+            names[i]: c if scale is None else c.scaled(s) for i, c in zip(use, cams, strict=True)
+        },
     )
 
 
@@ -2403,6 +2413,7 @@ def faces(
     progress: bool = True,
     face_options: Any = None,
     interocular: float | None = None,
+    repair: bool = True,
     **overrides: Any,
 ) -> tuple[VideoFaces, dict[str, Any]]:
     """Faces of everyone in view for a folder written by :func:`run` (its videos and
@@ -2423,6 +2434,15 @@ def faces(
     people. A run with a metric scale keeps it; the report gives every face's measured eye
     distance either way (``interocular_m``), a check of that scale.
 
+    The wearers' faces also check the cameras' relative poses (the report's ``pose_check``:
+    :func:`socialcam.faces.wearer_sightings`). Where they say structure from motion joined
+    groups of wearers wrongly, with ``repair`` each group is put back by its wearers' head
+    turns and the faces both sides see (:func:`socialcam.faces.repair_joins`), and the
+    faces are reconstructed again with the moved cameras; ``pose_check["repaired"]`` gives
+    each group moved (turn in degrees, shift in metres) and ``pose_check["unplaced"]`` those
+    that could not be. The run's own outputs (``poses.csv``, gaze, joint attention) keep
+    the poses SfM gave.
+
     Raises
     ------
     ValueError
@@ -2431,15 +2451,20 @@ def faces(
     socialcam.errors.DegenerateError
         With ``interocular``, no face seen by two cameras at once to measure.
     """
+    from socialcam._validate import apply_overrides
     from socialcam.faces import (
-        FACE_WIDTH,
+        FaceOptions,
         fuse_ego_exo,
         interocular_distances,
+        reconstruct_faces,
+        repair_joins,
+        scale_from_faces,
         wearer_sightings,
         wrong_pairs,
     )
 
     check_bool(plots, "plots")
+    check_bool(repair, "repair")
     out = Path(run_dir)
     report_p = out / "report.json"
     if not report_p.is_file() or not (out / "cache" / "sfm").is_dir():
@@ -2466,8 +2491,38 @@ def faces(
         progress=progress, face_options=face_options,
         interocular=None if metric else interocular, **overrides,
     )  # fmt: skip
-    f3, names = found.faces, list(found.names)
+    names = list(found.names)
     s_faces = 1.0 if found.scale is None else float(found.scale.metres_per_unit)
+    # the cameras in metres, as the faces are
+    cams_m = {n: rec.cameras[n] if found.scale is None else rec.cameras[n].scaled(s_faces)
+              for n in names}  # fmt: skip
+    # the wearers' faces where their cameras are: a check of the relative poses (and, where
+    # it finds groups joined wrongly, their repair)
+    expected, seen = wearer_sightings(list(found.detections), [cams_m[n] for n in names],
+                                      min_face=min_face)  # fmt: skip
+    before = wrong_pairs(expected, seen)
+    fixed = None
+    if repair and before:
+        fo = apply_overrides(face_options, FaceOptions, overrides)
+        fixed = repair_joins(list(found.detections), [cams_m[n] for n in names],
+                             min_face=min_face, face_options=fo)  # fmt: skip
+        if fixed.placed:
+            if found.scale is None:
+                moved = list(fixed.cameras)
+                again = reconstruct_faces(list(found.detections), moved, anchors=True,
+                                          options=fo)  # fmt: skip
+            else:  # the faces' scale measured again on the repaired map
+                sc, again = scale_from_faces(
+                    list(found.detections), [c.scaled(1.0 / s_faces) for c in fixed.cameras],
+                    interocular=cast(float, interocular), anchors=True, options=fo,
+                )  # fmt: skip
+                s_faces = float(sc.metres_per_unit)
+                moved = [c.scaled(s_faces) for c in fixed.cameras]
+                found = replace(found, scale=sc)
+            cams_m = dict(zip(names, moved, strict=True))
+            found = replace(found, faces=again, cameras=dict(cams_m))
+            expected, seen = wearer_sightings(list(found.detections), moved, min_face=min_face)
+    f3 = found.faces
     atomic_write_bytes(out / "faces.csv", faces_csv(f3, names).encode())
     # ego (gaze.csv) against exo per wearer, at the instants both exist
     ego: dict[str, dict[float, tuple[np.ndarray, float]]] = {}
@@ -2518,12 +2573,6 @@ def faces(
             "people_measured": len(fs.person),
             "relative_sd": fs.relative_sd,
         }
-    # the wearers' faces where their cameras are: a check of the relative poses
-    unit = 1.0 if found.scale is None else 1.0 / float(found.scale.metres_per_unit)
-    expected, seen = wearer_sightings(
-        list(found.detections), [rec.cameras[n] for n in names], min_face=min_face,
-        face_width=FACE_WIDTH * unit,
-    )  # fmt: skip
     n_exp, n_seen = int(expected.sum()), int(seen.sum())
     pose_check: dict[str, Any] = {
         "expected_sightings": n_exp,
@@ -2536,6 +2585,18 @@ def faces(
             if expected[i, j]
         },
     }
+    if fixed is not None:
+        pose_check["wrong_pairs_before_repair"] = [f"{names[i]} and {names[j]}" for i, j in before]
+        pose_check["repaired"] = [
+            {
+                "wearers": [names[i] for i in g],
+                "turn_deg": float(np.degrees(turn)),
+                "shift_m": [float(x) for x in shift],
+                "refined_by_faces": bool(refined),
+            }
+            for g, turn, shift, refined, _ in fixed.placed
+        ]
+        pose_check["unplaced"] = [[names[i] for i in g] for g in fixed.unplaced]
     off = [f"{names[i]} and {names[j]}" for i, j in wrong_pairs(expected, seen)]
     if off:
         pose_check["wrong_pairs"] = off
@@ -2565,8 +2626,9 @@ def faces(
         from socialcam.io import save_figure
         from socialcam.viz import plot_faces_top
 
-        cams = rec.cameras
-        if found.scale is not None:  # the faces are in metres: so are the cameras drawn
-            cams = {n: c.scaled(s_faces) for n, c in cams.items()}
+        # the faces are in metres: so are the cameras drawn (those repaired where they are)
+        cams = {n: c if found.scale is None else c.scaled(s_faces)
+                for n, c in rec.cameras.items()}  # fmt: skip
+        cams.update(cams_m)
         save_figure(plot_faces_top(f3, names, cams), out / "faces_top.png")
     return found, report
