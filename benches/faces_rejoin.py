@@ -6,7 +6,14 @@ turned by TURN degrees about the circle's centre. Prints per seed and turn: the 
 against the truth, the matches (face track, wearer, turn, spread in degrees, instants), the
 moved cameras' median centre errors (mm), or ``None``.
 
-Run: python benches/faces_rejoin.py OUT_DIR [seed ...] [turn=DEG ...]
+With ``repair=1`` (session 38) the whole repair instead, as ``socialcam faces`` runs it
+(``faces.repair_joins``): the groups found from the sightings (none given), placed by the head
+turns, refined by the faces both sides see; per seed and turn the groups, what was placed
+(turn, refined, residual in units of the landmark noise), the moved cameras' centre (mm) and
+orientation (deg) errors before and after the refinement, and the same on the true poses
+(which must stay where they are).
+
+Run: python benches/faces_rejoin.py OUT_DIR [seed ...] [turn=DEG ...] [repair=1]
 """
 
 from __future__ import annotations
@@ -19,12 +26,22 @@ import numpy as np
 from scipy.spatial.transform import Rotation
 
 from socialcam import Cameras
-from socialcam.faces import rejoin_by_head_turns
+from socialcam.faces import rejoin_by_head_turns, repair_joins
 from socialcam.synth.evaluate import truth_detections
 from socialcam.synth.render import load_truth, render_scene
 
 
-def evaluate(out: Path, seed: int, turns: list[float]) -> None:
+def _errors(cams, truth):
+    """Median centre (mm) and orientation (deg) errors of cameras 2 and 3."""
+    ce = [round(1e3 * float(np.median(np.linalg.norm(cams[v].C - truth[v].C, axis=1))))
+          for v in (2, 3)]  # fmt: skip
+    re = [round(float(np.degrees(np.median(Rotation.from_matrix(
+        cams[v].R @ np.transpose(truth[v].R, (0, 2, 1))).magnitude()))), 2)
+        for v in (2, 3)]  # fmt: skip
+    return ce, re
+
+
+def evaluate(out: Path, seed: int, turns: list[float], repair: bool = False) -> None:
     folder = out / f"circle{seed}_8s"
     if (folder / "truth.npz").exists():
         truth = load_truth(folder)
@@ -40,6 +57,21 @@ def evaluate(out: Path, seed: int, turns: list[float]) -> None:
         bad = [c if v < 2 else Cameras(c.K, c.R @ R.T, (c.C - centre) @ R.T + centre, c.times)
                for v, c in enumerate(cams)]  # fmt: skip
         t0 = time.perf_counter()
+        if repair:
+            j = repair_joins(dets, bad)
+            dt = time.perf_counter() - t0
+            placed = [(g, round(float(np.degrees(a)), 1), ref, round(res, 2))
+                      for g, a, _, ref, res in j.placed]  # fmt: skip
+            coarse = repair_joins(dets, bad, refine=False)
+            same = repair_joins(dets, cams)
+            moved = [v for v in range(len(cams)) if same.cameras[v] is not cams[v]]
+            print(f"{seed} turn {turn:+.0f}: groups ref {j.ref}, wrong before "
+                  f"{list(j.wrong_before)} after {list(j.wrong_after)}, placed {placed}, "
+                  f"unplaced {list(j.unplaced)}; cameras 2, 3 (mm, deg): "
+                  f"{_errors(j.cameras, cams)}, head turns alone {_errors(coarse.cameras, cams)}"
+                  f"; true poses: flagged {list(same.wrong_before)}, moved {moved} "
+                  f"({dt:.2f} s)", flush=True)  # fmt: skip
+            continue
         r = rejoin_by_head_turns(dets, bad, [0, 1], [2, 3])
         dt = time.perf_counter() - t0
         if r is None:
@@ -57,8 +89,9 @@ def evaluate(out: Path, seed: int, turns: list[float]) -> None:
 def main(argv: list[str]) -> None:
     out = Path(argv[0])
     turns = [float(a.split("=", 1)[1]) for a in argv[1:] if a.startswith("turn=")] or [35.0]
+    repair = any(a == "repair=1" for a in argv[1:])
     for seed in [int(a) for a in argv[1:] if "=" not in a] or [3]:
-        evaluate(out, seed, turns)
+        evaluate(out, seed, turns, repair)
 
 
 if __name__ == "__main__":
