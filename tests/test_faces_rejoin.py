@@ -174,7 +174,7 @@ def test_sighting_groups():
         sighting_groups(e, e, min_expected=0)
 
 
-def test_faces_of_a_run_repair_a_wrong_join(tmp_path, scene8, circle8, monkeypatch):
+def test_faces_of_a_run_repair_a_wrong_join(tmp_path, scene8, circle8, monkeypatch, capsys):
     """``pipeline.faces`` on a run whose poses put wearers 2 and 3 35° round the circle:
     the pose check finds them, the repair puts them back, the faces are reconstructed again
     with the moved cameras (the detections: the truth's detector-like landmarks, in place
@@ -222,3 +222,10 @@ def test_faces_of_a_run_repair_a_wrong_join(tmp_path, scene8, circle8, monkeypat
     assert "warning" in plain["pose_check"] and "repaired" not in plain["pose_check"]
     n_plain = sum(p["instants"] for p in plain["people"])
     assert n_fixed >= 0.95 * n_true and n_plain < 0.8 * n_true, (n_fixed, n_plain, n_true)
+    from socialcam.cli import main
+
+    capsys.readouterr()
+    assert main(["faces", str(run), "--no-plots"]) == 0
+    out = capsys.readouterr()
+    assert f"repaired a wrong join: {names[2]}, {names[3]} turned -35" in out.out, out.out
+    assert "warning" not in out.err, out.err

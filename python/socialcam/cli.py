@@ -4,6 +4,7 @@ from __future__ import annotations
 
 import argparse
 import json
+import math
 import sys
 from collections.abc import Sequence
 from pathlib import Path
@@ -456,7 +457,15 @@ def _faces(
             "people without a camera reconstructed"
         )
         sc = report.get("scale") or {}
-        for part in (sc, report.get("pose_check") or {}):
+        pc = report.get("pose_check") or {}
+        for r in pc.get("repaired", []):
+            print(
+                f"repaired a wrong join: {', '.join(r['wearers'])} turned "
+                f"{r['turn_deg']:+.1f}° and shifted {math.hypot(*r['shift_m']):.2f} m "
+                f"by their head turns{' and the faces' if r['refined_by_faces'] else ''} "
+                "(the faces use the repaired poses; the run's outputs keep SfM's)"
+            )
+        for part in (sc, pc):
             if part.get("warning"):
                 print(f"warning: {part['warning']}", file=sys.stderr)
         if sc.get("source") == "faces":
