@@ -16,6 +16,12 @@ person, 3D faces and their primary gaze rays (thesis Sec 3.2.2, Eq 3.2–3.4).
 - :func:`scale_from_faces` gives cameras posed in a map of unknown unit (structure from
   motion without a floor or a known distance) a metric scale: the people's eyes are
   ``INTEROCULAR`` (63 mm) apart on median.
+- :func:`repair_joins` checks the cameras' relative poses by the wearers' faces
+  (:func:`wearer_sightings`: is each wearer's face seen where its camera is?), splits the
+  cameras into groups that agree (:func:`sighting_groups`) and puts a group that structure
+  from motion joined wrongly back by its wearers' head turns
+  (:func:`rejoin_by_head_turns`), refined by the faces both sides see
+  (:func:`align_by_faces`).
 
 Landmark order everywhere: ``LANDMARKS`` = left eye, right eye, nose, left mouth corner,
 right mouth corner, where "left" is the IMAGE left of a face seen from the front (the
