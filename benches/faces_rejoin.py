@@ -65,7 +65,8 @@ def evaluate(out: Path, seed: int, turns: list[float], repair: bool = False) -> 
             coarse = repair_joins(dets, bad, refine=False)
             same = repair_joins(dets, cams)
             moved = [v for v in range(len(cams)) if same.cameras[v] is not cams[v]]
-            print(f"{seed} turn {turn:+.0f}: groups ref {j.ref}, wrong before "
+            moved_bad = [v for v in range(len(cams)) if j.cameras[v] is not bad[v]]
+            print(f"{seed} turn {turn:+.0f}: groups ref {j.ref}, moved {moved_bad}, wrong before "
                   f"{list(j.wrong_before)} after {list(j.wrong_after)}, placed {placed}, "
                   f"unplaced {list(j.unplaced)}; cameras 2, 3 (mm, deg): "
                   f"{_errors(j.cameras, cams)}, head turns alone {_errors(coarse.cameras, cams)}"

@@ -2231,10 +2231,10 @@ def repair_joins(
     cameras into groups that agree (:func:`sighting_groups`); the largest is the reference.
     Every other group that :func:`wrong_pairs` (``min_expected``) sets against the reference
     is placed by its wearers' head turns (:func:`rejoin_by_head_turns`), the placement
-    refined by the faces both sides reconstruct (:func:`align_by_faces`, with ``refine``;
-    kept unrefined when the group has one camera or shares too few faces), and kept when the
-    sightings between the group and the reference then no longer contradict it. A group
-    that cannot be placed is left where it was and reported.
+    refined by the faces both sides see (:func:`align_by_faces`, with ``refine``; kept
+    unrefined when they share too few faces), and kept when the sightings between the group
+    and the reference then no longer contradict it and no pair of cameras is contradicted
+    that was not before. A group that cannot be placed is left where it was and reported.
     """
     check_bool(refine, "refine")
     expected, found = wearer_sightings(detections, cameras, min_face=min_face,
@@ -2259,12 +2259,15 @@ def repair_joins(
                 R, t = a.R @ R, a.R @ t + a.t
                 moved, refined, resid = list(a.cameras), True, a.residual
         # kept when the faces now appear where the moved cameras say: no wrong pair across,
-        # most of the sightings across found
+        # most of the sightings across found, and no pair wrong that was not before (a
+        # group placed by a reference that is itself the wrongly joined part contradicts
+        # the rest: measured once, a camera moved 20° with the turned pair)
         e2, f2 = wearer_sightings(detections, moved, min_face=min_face, face_width=face_width)
         across = np.zeros((len(cams), len(cams)), bool)
         across[np.ix_(ref, g)] = across[np.ix_(g, ref)] = True
         evid = across & (e2 >= min_expected)
-        if (any(across[i, j] for i, j in wrong_pairs(e2, f2, min_expected))
+        now = wrong_pairs(e2, f2, min_expected)
+        if (any(across[i, j] for i, j in now) or set(now) - set(before)
                 or (e2[evid] - 2 * f2[evid]).sum() > 0):  # fmt: skip
             unplaced.append(tuple(g))
             continue
