@@ -2511,13 +2511,14 @@ def faces(
                 moved = list(fixed.cameras)
                 again = reconstruct_faces(list(found.detections), moved, anchors=True,
                                           options=fo)  # fmt: skip
-            else:  # the faces' scale measured again on the repaired map
+            else:  # the faces' scale measured again on the repaired map (map units)
+                in_map = [c.scaled(1.0 / s_faces) for c in fixed.cameras]
                 sc, again = scale_from_faces(
-                    list(found.detections), [c.scaled(1.0 / s_faces) for c in fixed.cameras],
-                    interocular=cast(float, interocular), anchors=True, options=fo,
+                    list(found.detections), in_map, interocular=cast(float, interocular),
+                    anchors=True, options=fo,
                 )  # fmt: skip
                 s_faces = float(sc.metres_per_unit)
-                moved = [c.scaled(s_faces) for c in fixed.cameras]
+                moved = [c.scaled(s_faces) for c in in_map]
                 found = replace(found, scale=sc)
             cams_m = dict(zip(names, moved, strict=True))
             found = replace(found, faces=again, cameras=dict(cams_m))
