@@ -250,3 +250,23 @@ def test_faces_of_a_run_repair_a_wrong_join(tmp_path, scene8, circle8, monkeypat
     err = [float(np.median(np.linalg.norm(found_m.cameras[n].C - c.C, axis=1)))
            for n, c in zip(names, cams, strict=True)]  # fmt: skip
     assert abs(s / unit - 1) < 0.05 and max(err) < 0.1, (s, err)
+
+
+def test_repair_and_align_bad_input(circle8):
+    from socialcam.faces import align_by_faces, repair_joins
+
+    dets, cams = circle8
+    with pytest.raises(ValueError, match="ref, group"):
+        align_by_faces(dets, cams, [0, 1], [1, 2])
+    with pytest.raises(ValueError, match="cameras"):
+        align_by_faces(dets, cams[:3], [0, 1], [2])
+    with pytest.raises(ValueError, match="gate"):
+        align_by_faces(dets, cams, [0, 1], [2, 3], gate=0.0)
+    with pytest.raises(ValueError, match="min_points"):
+        align_by_faces(dets, cams, [0, 1], [2, 3], min_points=1)
+    with pytest.raises(ValueError, match="refine"):
+        repair_joins(dets, cams, refine="yes")
+    with pytest.raises(ValueError, match="cameras"):
+        repair_joins(dets, cams[:3])
+    with pytest.raises(ValueError, match="min_expected"):
+        repair_joins(dets, cams, min_expected=0)
