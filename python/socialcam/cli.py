@@ -463,7 +463,16 @@ def _faces(
                 f"repaired a wrong join: {', '.join(r['wearers'])} turned "
                 f"{r['turn_deg']:+.1f}° and shifted {math.hypot(*r['shift_m']):.2f} m "
                 f"by their head turns{' and the faces' if r['refined_by_faces'] else ''} "
-                "(the faces use the repaired poses; the run's outputs keep SfM's)"
+                "(the faces use the repaired poses)"
+            )
+        rr = report.get("repaired_run")
+        if rr:
+            before = (rr.get("charges_before") or {}).get("total")
+            was = "" if before is None else f"; {before} with the poses SfM gave"
+            print(
+                f"gaze and joint attention again with the repaired poses: {rr['folder']}/ "
+                f"({rr['charges']['total']} charges in {rr['charges']['frames_with_charges']} "
+                f"frames{was})"
             )
         for part in (sc, pc):
             if part.get("warning"):

@@ -2166,6 +2166,22 @@ class JoinRepair:
     wrong_before: tuple[tuple[int, int], ...]
     wrong_after: tuple[tuple[int, int], ...]
 
+    def motion(self, camera: int) -> tuple[FloatArray, FloatArray]:
+        """The rigid motion ``X' = R X + t`` that put camera ``camera`` (an index into
+        :attr:`cameras`) where :attr:`cameras` holds it: ``R (3, 3)``, the turn about the
+        vertical of its group in :attr:`placed`, and ``t (3,)`` its shift (the cameras'
+        unit); the identity for a camera not moved. Anything posed with that camera moves
+        the same way: e.g. its wearer's ego gaze rays, ``p' = R p + t``, ``v' = R v``."""
+        check_int(camera, "camera", min=0)
+        if camera >= len(self.cameras):
+            raise ValueError(f"camera: {camera} is not one of the {len(self.cameras)} cameras")
+        for g, turn, shift, _, _ in self.placed:
+            if camera in g:
+                c, s = np.cos(turn), np.sin(turn)
+                R = np.array([[c, -s, 0.0], [s, c, 0.0], [0.0, 0.0, 1.0]])
+                return readonly(R), readonly(np.array(shift, dtype=np.float64))
+        return readonly(np.eye(3)), readonly(np.zeros(3))
+
 
 def sighting_groups(expected: IntArray, found: IntArray, min_expected: int = 5) -> list[list[int]]:
     """The cameras split into the groups that the wearers' sightings

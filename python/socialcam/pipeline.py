@@ -13,7 +13,7 @@ import json
 import os
 import time
 import warnings
-from collections.abc import Mapping, Sequence
+from collections.abc import Collection, Mapping, Sequence
 from concurrent.futures import ThreadPoolExecutor
 from dataclasses import asdict, dataclass, fields, replace
 from pathlib import Path
@@ -1345,7 +1345,7 @@ def run(
         z = cache.read_npz("gaze.npz")
         times = z["times"]
         gaze = {n: (z[f"{n}.p"], z[f"{n}.v"], z[f"{n}.h"]) for n in names if f"{n}.p" in z}
-        frames = _frames(names, _social(gaze, times, segments, calibrations, opts))
+        frames = _frames(names, _social(gaze, times, segments, _calibrated(calibrations), opts))
         done("gaze", t0, cached)
 
         # ---------------------------------------------------------------- charges
@@ -1605,26 +1605,30 @@ def _gaze_frames(
         for n in names
         if f"{n}.p" in arrays
     }
-    frames = _frames(names, _social(gaze, arrays["times"], segments, cals, opts))
+    frames = _frames(names, _social(gaze, arrays["times"], segments, _calibrated(cals), opts))
     return cals, arrays["times"], frames
+
+
+def _calibrated(calibrations: Mapping[str, GazeCalibration]) -> set[str]:
+    return {n for n, c in calibrations.items() if c.calibrated}
 
 
 def _social(
     gaze: Mapping[str, tuple[FloatArray, FloatArray, FloatArray]],
     times: FloatArray,
     segments: Mapping[str, tuple[float, float]],
-    calibrations: Mapping[str, GazeCalibration],
+    calibrated: Collection[str],
     opts: RunOptions,
 ) -> dict[str, tuple[FloatArray, FloatArray, FloatArray]]:
     """The gaze rays that take part in social charges: without the rays of each
-    calibrated wearer inside its calibration segment (NaN there) unless
+    ``calibrated`` wearer inside its calibration segment (NaN there) unless
     ``charges_in_calibration``. A wearer whose segment failed (did not fixate, ...) keeps
     them: it was doing something else then."""
     if opts.charges_in_calibration:
         return dict(gaze)
     out = {}
     for n, (p, v, h) in gaze.items():
-        if n in segments and n in calibrations and calibrations[n].calibrated:
+        if n in segments and n in calibrated:
             t0, t1 = segments[n]
             inside = (times >= t0) & (times <= t1)
             p, v, h = p.copy(), v.copy(), h.copy()
@@ -2404,6 +2408,104 @@ def _scale_check(f3: Any, interocular: float | None = None) -> dict[str, Any]:
     return out
 
 
+#: Subfolder of a run folder where :func:`faces` writes the run's gaze and joint attention
+#: again with the poses it repaired.
+REPAIRED_DIR = "repaired"
+
+
+def read_gaze_csv(
+    path: str | os.PathLike[str], names: Sequence[str], fps: float
+) -> tuple[FloatArray, dict[str, tuple[FloatArray, FloatArray, FloatArray]]]:
+    """``gaze.csv`` (:func:`gaze_csv`) back into arrays: the output times (multiples of
+    ``1/fps`` from the first row's to the last's) and per person of ``names`` found in it
+    ``(p (T, 3), v (T, 3), h (T,))``, NaN where it has no row."""
+    rows: dict[str, list[list[float]]] = {}
+    lines = Path(path).read_text().splitlines()
+    if not lines or lines[0] != GAZE_HEADER:
+        raise ValueError(f"path: {path} is not a gaze.csv ({GAZE_HEADER})")
+    for i, line in enumerate(lines[1:], start=2):
+        c = line.split(",")
+        if c[0] in names:
+            try:
+                if len(c) != 9:
+                    raise ValueError(f"{len(c)} fields, expected 9")
+                rows.setdefault(c[0], []).append([float(x) for x in c[1:9]])
+            except ValueError as exc:
+                raise ValueError(f"path: {path} line {i}: {exc}") from None
+    if not rows:
+        return np.zeros(0), {}
+    arrs = {n: np.array(r) for n, r in rows.items()}
+    ks = {n: np.rint(a[:, 0] * fps).astype(np.int64) for n, a in arrs.items()}
+    k0 = min(int(k.min()) for k in ks.values())
+    k1 = max(int(k.max()) for k in ks.values())
+    times = np.arange(k0, k1 + 1) / fps
+    gaze = {}
+    for n in names:
+        if n not in arrs:
+            continue
+        a, at = arrs[n], ks[n] - k0
+        p, v, h = (
+            np.full((len(times), 3), np.nan),
+            np.full((len(times), 3), np.nan),
+            np.full(len(times), np.nan),
+        )
+        p[at], v[at], h[at] = a[:, 1:4], a[:, 4:7], a[:, 7]
+        gaze[n] = (p, v, h)
+    return times, gaze
+
+
+def _repaired_run(
+    out: Path,
+    rec: VideoReconstruction,
+    run_report: Mapping[str, Any],
+    motions: Mapping[str, tuple[FloatArray, FloatArray]],
+) -> dict[str, Any]:
+    """The run's gaze rays and joint attention again with the poses :func:`faces` repaired:
+    each moved wearer's rays (``gaze.csv``) move with its camera (``motions``: person →
+    ``(R, t)`` in the run's unit, ``X' = R X + t``; its calibration lives in the camera's
+    frame, so the rays it gives move rigidly too), then the charge and track stages as
+    :func:`run` with the run's options. Writes ``poses.csv``, ``gaze.csv``,
+    ``charges.csv`` (and with ``plots`` the charge plots) into ``out/repaired``; returns
+    the report's figures of it."""
+    fields_ = {f.name for f in fields(RunOptions)}
+    opts = RunOptions(**{k: v for k, v in run_report["options"].items() if k in fields_})
+    names = list(run_report.get("names") or rec.names)
+    times, gaze = read_gaze_csv(out / "gaze.csv", names, opts.fps)
+    moved = {}
+    for n, (p, v, h) in gaze.items():
+        if n in motions:
+            R, t = motions[n]
+            p, v = p @ R.T + t, v @ R.T
+        moved[n] = (p, v, h)
+    segments = _parse_segments(run_report.get("inputs", {}).get("calibration") or None, names)
+    calibrated = {n for n, c in run_report.get("calibration", {}).items()
+                  if c.get("status") == "calibrated"}  # fmt: skip
+    frames = _frames(names, _social(moved, times, segments, calibrated, opts))
+    charges = _find_charges(frames, times, opts)
+    tracks = track_charges(
+        charges, bandwidth=opts.track_bandwidth, min_length=opts.track_min_length
+    )
+    cams = {n: c.moved(*motions[n]) if n in motions else c for n, c in rec.cameras.items()}
+    fixed = replace(rec, cameras=cams)
+    d = out / REPAIRED_DIR
+    d.mkdir(exist_ok=True)
+    atomic_write_bytes(d / "poses.csv", poses_csv(fixed).encode())
+    atomic_write_bytes(d / "gaze.csv", gaze_csv(names, times, moved).encode())
+    atomic_write_bytes(d / "charges.csv", charges_csv(names, times, charges, tracks).encode())
+    if opts.plots:
+        _plots(d, names, times, charges, tracks, fixed, segments)
+    return {
+        "folder": REPAIRED_DIR,
+        "moved": sorted(motions),
+        "charges": {
+            "total": sum(len(cs) for cs in charges),
+            "frames_with_charges": int(sum(1 for cs in charges if cs)),
+            "tracks": len(tracks),
+        },
+        "charges_before": run_report.get("charges"),
+    }
+
+
 def faces(
     run_dir: str | os.PathLike[str],
     *,
@@ -2440,8 +2542,11 @@ def faces(
     turns and the faces both sides see (:func:`socialcam.faces.repair_joins`), and the
     faces are reconstructed again with the moved cameras; ``pose_check["repaired"]`` gives
     each group moved (turn in degrees, shift in metres) and ``pose_check["unplaced"]`` those
-    that could not be. The run's own outputs (``poses.csv``, gaze, joint attention) keep
-    the poses SfM gave.
+    that could not be. The run's own files (``poses.csv``, ``gaze.csv``, ``charges.csv``)
+    keep the poses SfM gave; the ego gaze the faces are compared with moves with its
+    repaired camera, and the run's gaze rays and joint attention are made again with the
+    repaired poses into ``run_dir/repaired`` (``poses.csv``, ``gaze.csv``, ``charges.csv``,
+    the charge plots; the report's ``repaired_run``).
 
     Raises
     ------
@@ -2502,11 +2607,16 @@ def faces(
                                       min_face=min_face)  # fmt: skip
     before = wrong_pairs(expected, seen)
     fixed = None
+    motions: dict[str, tuple[FloatArray, FloatArray]] = {}  # person → (R, t), run's unit
     if repair and before:
         fo = apply_overrides(face_options, FaceOptions, overrides)
         fixed = repair_joins(list(found.detections), [cams_m[n] for n in names],
                              min_face=min_face, face_options=fo)  # fmt: skip
         if fixed.placed:
+            for g, *_ in fixed.placed:
+                for v in g:
+                    R, t = fixed.motion(v)
+                    motions[names[v]] = (R, t / s_faces)
             if found.scale is None:
                 moved = list(fixed.cameras)
                 again = reconstruct_faces(list(found.detections), moved, anchors=True,
@@ -2554,6 +2664,8 @@ def faces(
             both = [t for t in np.flatnonzero(ok) if round(float(f3.times[t]), 3) in at]
             if both:
                 ev = np.array([at[round(float(f3.times[t]), 3)][0] for t in both])
+                if names[pid] in motions:  # its ego rays moved with its repaired camera
+                    ev = ev @ motions[names[pid]][0].T
                 eh = np.array([at[round(float(f3.times[t]), 3)][1] for t in both])
                 _, _, dis = fuse_ego_exo(ev, eh, f3.v[both, j], f3.h[both, j])
                 entry["ego_exo_instants"] = len(both)
@@ -2622,6 +2734,8 @@ def faces(
         "others_found": int(sum(1 for p in people if not p["wearer"])),
         "seconds": time.perf_counter() - t0,
     }
+    if motions and (out / "gaze.csv").is_file() and "options" in run_report:
+        report["repaired_run"] = _repaired_run(out, rec, run_report, motions)
     write_json(out / "faces.json", report)
     if plots:
         from socialcam.io import save_figure
