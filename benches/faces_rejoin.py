@@ -13,7 +13,13 @@ turns, refined by the faces both sides see; per seed and turn the groups, what w
 orientation (deg) errors before and after the refinement, and the same on the true poses
 (which must stay where they are).
 
-Run: python benches/faces_rejoin.py OUT_DIR [seed ...] [turn=DEG ...] [repair=1]
+With ``attention=1`` as well (session 39) the wearers' joint attention from their ego gaze, as
+``socialcam faces`` makes it again into ``repaired/``: the true primary gaze rays moved with
+each camera (true poses, turned, repaired: ``JoinRepair.motion``), charges as ``socialcam run``
+finds them (default options), scored against the truth (``synth.evaluate.joint_attention``):
+median and p90 error (mm) and the fraction of the looking groups found.
+
+Run: python benches/faces_rejoin.py OUT_DIR [seed ...] [turn=DEG ...] [repair=1 [attention=1]]
 """
 
 from __future__ import annotations
@@ -27,7 +33,8 @@ from scipy.spatial.transform import Rotation
 
 from socialcam import Cameras
 from socialcam.faces import rejoin_by_head_turns, repair_joins
-from socialcam.synth.evaluate import truth_detections
+from socialcam.pipeline import RunOptions, _find_charges, _frames
+from socialcam.synth.evaluate import joint_attention, truth_detections
 from socialcam.synth.render import load_truth, render_scene
 
 
@@ -41,7 +48,24 @@ def _errors(cams, truth):
     return ce, re
 
 
-def evaluate(out: Path, seed: int, turns: list[float], repair: bool = False) -> None:
+def _attention(truth, times, motion) -> str:
+    """Joint attention of the wearers' true gaze rays moved by ``motion(v) -> (R, t)``."""
+    names = list(truth.names)
+    gaze = {}
+    for v, n in enumerate(names):
+        R, t = motion(v)
+        gaze[n] = (truth.eyes[v] @ R.T + t, truth.gaze[v] @ R.T, np.full(len(times), truth.h[v]))
+    r = joint_attention(truth, names, times, _find_charges(_frames(names, gaze), times,
+                                                           RunOptions()))  # fmt: skip
+    return (
+        f"{1e3 * r['error_median_m']:.0f}/{1e3 * r['error_p90_m']:.0f} mm "
+        f"found {r['found_fraction']:.2f}"
+    )
+
+
+def evaluate(
+    out: Path, seed: int, turns: list[float], repair: bool = False, attention: bool = False
+) -> None:
     folder = out / f"circle{seed}_8s"
     if (folder / "truth.npz").exists():
         truth = load_truth(folder)
@@ -72,6 +96,20 @@ def evaluate(out: Path, seed: int, turns: list[float], repair: bool = False) -> 
                   f"{_errors(j.cameras, cams)}, head turns alone {_errors(coarse.cameras, cams)}"
                   f"; true poses: flagged {list(same.wrong_before)}, moved {moved} "
                   f"({dt:.2f} s)", flush=True)  # fmt: skip
+            if attention:
+                times = cams[0].times
+
+                def turned(v, R=R):
+                    return (np.eye(3), np.zeros(3)) if v < 2 else (R, centre - R @ centre)
+
+                def fixed(v, j=j, turned=turned):
+                    (A, a), (B, b) = j.motion(v), turned(v)
+                    return A @ B, A @ b + a
+
+                print(f"   ego joint attention (median/p90): true poses "
+                      f"{_attention(truth, times, lambda v: (np.eye(3), np.zeros(3)))}, turned "
+                      f"{_attention(truth, times, turned)}, repaired "
+                      f"{_attention(truth, times, fixed)}", flush=True)  # fmt: skip
             continue
         r = rejoin_by_head_turns(dets, bad, [0, 1], [2, 3])
         dt = time.perf_counter() - t0
@@ -91,8 +129,9 @@ def main(argv: list[str]) -> None:
     out = Path(argv[0])
     turns = [float(a.split("=", 1)[1]) for a in argv[1:] if a.startswith("turn=")] or [35.0]
     repair = any(a == "repair=1" for a in argv[1:])
+    attention = any(a == "attention=1" for a in argv[1:])
     for seed in [int(a) for a in argv[1:] if "=" not in a] or [3]:
-        evaluate(out, seed, turns, repair)
+        evaluate(out, seed, turns, repair, attention)
 
 
 if __name__ == "__main__":
