@@ -8,6 +8,7 @@ from __future__ import annotations
 import csv
 import dataclasses
 import json
+import shutil
 
 import numpy as np
 import pytest
@@ -29,10 +30,18 @@ def scene(tmp_path_factory):
 
 
 @pytest.fixture(scope="module")
-def found(scene):
+def cache(tmp_path_factory):
+    """The scene's detections as ``faces_in_videos`` keeps them (``cache_dir``): copied into
+    the run folders below, so that their ``socialcam faces`` reads them instead of running
+    MTCNN again (what is kept, and when it is not used, is tested apart)."""
+    return tmp_path_factory.mktemp("faces_cache")
+
+
+@pytest.fixture(scope="module")
+def found(scene, cache):
     tr = scene.truth
     cams = {n: tr.cameras(v) for v, n in enumerate(tr.names)}
-    return faces_in_videos(scene.videos, cams, progress=False)
+    return faces_in_videos(scene.videos, cams, progress=False, cache_dir=cache)
 
 
 def test_faces_from_videos_and_poses(scene, found):
@@ -65,13 +74,64 @@ def test_frames_are_the_posed_times_on_the_videos_clock(scene, found):
     ), (good, bad)
 
 
-def _run_folder(tmp_path, scene, scale=1.0, unit=1.0):
+def test_detections_are_kept_and_read_again(tmp_path, scene, found, cache, monkeypatch):
+    """``faces_in_videos(cache_dir=...)`` keeps each video's detections: a second call on
+    the same frames reads them (the detector is not run: here it would raise) and gives the
+    same faces; other frames, another ``min_face``, a touched video file or an unreadable
+    file run the detector again."""
+    import os
+
+    import socialcam.faces as sf
+
+    tr = scene.truth
+    cams = {n: tr.cameras(v) for v, n in enumerate(tr.names)}
+    kept = tmp_path / "kept"
+    shutil.copytree(cache, kept)
+    assert sorted(p.name for p in kept.iterdir()) == sorted(f"{n}.npz" for n in tr.names)
+
+    class Detected(Exception):
+        pass
+
+    def detector(*_, **__):
+        raise Detected
+
+    monkeypatch.setattr(sf, "detect_faces", detector)
+    again = faces_in_videos(scene.videos, cams, progress=False, cache_dir=kept)
+    for a, b in zip(again.detections, found.detections, strict=True):
+        np.testing.assert_array_equal(a.landmarks, b.landmarks)
+        np.testing.assert_array_equal(a.frame, b.frame)
+        assert a.size == b.size and a.landmark_source == b.landmark_source
+    np.testing.assert_array_equal(again.faces.landmarks, found.faces.landmarks)
+    with pytest.raises(Detected):
+        faces_in_videos(scene.videos, cams, progress=False, cache_dir=kept, min_face=14.0)
+    first = {n: c[: len(c) // 2] for n, c in cams.items()}
+    with pytest.raises(Detected):
+        faces_in_videos(scene.videos, first, progress=False, cache_dir=kept)
+    (kept / f"{tr.names[0]}.npz").write_bytes(b"not an npz")
+    with pytest.raises(Detected):
+        faces_in_videos(scene.videos, cams, progress=False, cache_dir=kept)
+    shutil.copy(cache / f"{tr.names[0]}.npz", kept)
+    st = os.stat(scene.videos[1])
+    os.utime(scene.videos[1], ns=(st.st_atime_ns, st.st_mtime_ns + 10**9))
+    try:
+        with pytest.raises(Detected):
+            faces_in_videos(scene.videos, cams, progress=False, cache_dir=kept)
+    finally:
+        os.utime(scene.videos[1], ns=(st.st_atime_ns, st.st_mtime_ns))
+    with pytest.raises(ValueError, match="cache_dir"):
+        faces_in_videos(scene.videos, cams, progress=False, cache_dir=3)
+
+
+def _run_folder(tmp_path, scene, scale=1.0, unit=1.0, cache=None):
     """A run folder as ``socialcam run`` leaves it (poses in cache/sfm, report.json naming
     the videos, gaze.csv), with the true poses (centres divided by ``unit``: a map in
-    units of ``unit`` metres) and the true ego gaze, without SfM."""
+    units of ``unit`` metres) and the true ego gaze, without SfM; with ``cache``, the
+    detections kept there (``cache/faces``)."""
     tr = scene.truth
     run = tmp_path / "run"
     (run / "cache" / "sfm").mkdir(parents=True)
+    if cache is not None:
+        shutil.copytree(cache, run / "cache" / "faces")
     cams = {}
     for v, n in enumerate(tr.names):
         c = tr.cameras(v)
@@ -95,12 +155,12 @@ def _run_folder(tmp_path, scene, scale=1.0, unit=1.0):
     return run
 
 
-def test_faces_of_a_run_folder(tmp_path, scene, found, capsys):
+def test_faces_of_a_run_folder(tmp_path, scene, found, cache, capsys):
     """``socialcam faces RUN_DIR``: faces.csv holds every reconstructed face (the same as
     ``faces_in_videos``), faces.json each wearer's exo gaze against its ego gaze (the true
     primary gaze here: the disagreement is the face's gaze error plus the eye-in-head
     offset, measured 3-6° median per wearer)."""
-    run = _run_folder(tmp_path, scene)
+    run = _run_folder(tmp_path, scene, cache=cache)
     assert main(["faces", str(run)]) == 0
     assert "faces written" in capsys.readouterr().out
     report = json.loads((run / "faces.json").read_text())
@@ -156,7 +216,7 @@ def test_faces_of_a_run_folder(tmp_path, scene, found, capsys):
         plot_faces_top(f3, found.names, every=0)
     # not a run; a run without metric poses
     assert main(["faces", str(tmp_path / "nothing")]) == 2
-    unscaled = _run_folder(tmp_path / "u", scene, scale=float("nan"))
+    unscaled = _run_folder(tmp_path / "u", scene, scale=float("nan"), cache=cache)
     with pytest.raises(ValueError, match="no metric scale"):
         faces(unscaled)
     with pytest.raises(ValueError, match="at least two posed wearers"):
@@ -179,7 +239,7 @@ def test_a_scene_without_faces_is_said_not_an_error(tmp_path, capsys):
     assert not (run / "faces_top.png").exists()
 
 
-def test_a_run_without_metric_scale_is_scaled_by_the_faces(tmp_path, scene, found, capsys):
+def test_a_run_without_metric_scale_is_scaled_by_the_faces(tmp_path, scene, found, cache, capsys):
     """A run whose poses are in map units (no floor found, no known distance): refused
     without a scale, and ``socialcam faces --scale-from-faces`` reads the scale off the
     faces' eyes (63 mm apart on median). Measured on this scene (every face drawn 63 mm,
@@ -188,7 +248,7 @@ def test_a_run_without_metric_scale_is_scaled_by_the_faces(tmp_path, scene, foun
     detections at another scale: the same geometry, to 5 mm). The fixed point's red check
     is in ``tests/test_faces.py``."""
     unit = 3.7
-    run = _run_folder(tmp_path, scene, scale=float("nan"), unit=unit)
+    run = _run_folder(tmp_path, scene, scale=float("nan"), unit=unit, cache=cache)
     with pytest.raises(ValueError, match="no metric scale"):
         faces(run, plots=False, progress=False)
     assert main(["faces", str(run), "--scale-from-faces", "--no-plots"]) == 0

@@ -2234,6 +2234,89 @@ class VideoFaces:
     cameras: Mapping[str, Cameras] | None = None
 
 
+#: Version of what :func:`faces_in_videos` keeps per video (``cache_dir``): raise it when
+#: the detector or what is stored changes.
+DETECTIONS_CACHE_VERSION = 1
+
+
+def _detections_key(video: Path, local: FloatArray, landmarks: str, min_face: float) -> str:
+    st = os.stat(video)
+    h = hashlib.sha256()
+    h.update(f"{os.path.abspath(video)}|{st.st_size}|{st.st_mtime_ns}|{landmarks}|"
+             f"{float(min_face)!r}|{DETECTIONS_CACHE_VERSION}\n".encode())  # fmt: skip
+    h.update(np.round(np.asarray(local, np.float64), 6).tobytes())
+    return h.hexdigest()[:16]
+
+
+def _cached_detections(
+    video: Path,
+    name: str,
+    local: FloatArray,
+    landmarks: str,
+    min_face: float,
+    progress: bool,
+    cache_dir: Path | None,
+) -> dict[str, Any]:
+    """The faces found in ``video`` at the local times ``local`` (one entry per frame of
+    the camera, in its order), as the detector gives them (distorted pixels): ``frame``
+    (the camera frame of each detection), ``box``, ``confidence``, ``landmarks``, ``noise``
+    (NaN: the source's default), ``size`` and ``source``; read from ``cache_dir`` when it
+    holds them under the same key."""
+    from socialcam.faces import detect_faces
+    from socialcam.video import open_video
+
+    key = _detections_key(video, local, landmarks, min_face)
+    path = None if cache_dir is None else cache_dir / f"{name}.npz"
+    if path is not None and path.is_file():
+        try:
+            with np.load(path, allow_pickle=False) as z:
+                if str(z["key"]) == key:
+                    out: dict[str, Any] = {k: z[k] for k in ("frame", "box", "confidence",
+                                                            "landmarks", "noise")}  # fmt: skip
+                    out["size"] = (int(z["size"][0]), int(z["size"][1]))
+                    out["source"] = str(z["source"])
+                    return out
+        except (OSError, ValueError, KeyError):
+            pass  # unreadable: detected again and rewritten
+    frames, boxes, conf, lms, noise = [], [], [], [], []
+    size: tuple[int, int] | None = None
+    source = landmarks
+    with open_video(video) as vid:
+        order = np.argsort(local, kind="stable")
+        stream = frames_at(vid, local[order])
+        if progress:
+            from tqdm.auto import tqdm  # type: ignore[import-untyped]
+
+            stream = tqdm(stream, total=len(order), desc=f"faces {name}", unit="frame")
+        for j, image in stream:
+            k = int(order[j])
+            d = detect_faces(image, min_face=min_face, landmarks=landmarks)
+            size = d.size
+            source = d.landmark_source
+            if not len(d):
+                continue
+            frames.append(np.full(len(d), k, np.int64))
+            boxes.append(d.box)
+            conf.append(d.confidence)
+            lms.append(d.landmarks)
+            noise.append(np.full(len(d), np.nan) if d.landmark_noise is None else d.landmark_noise)
+    if size is None:
+        raise ValueError(f"videos: no frame of {os.fspath(video)!r} at its posed times")
+    found: dict[str, Any] = {
+        "frame": np.concatenate(frames) if frames else np.zeros(0, np.int64),
+        "box": np.concatenate(boxes) if boxes else np.zeros((0, 4)),
+        "confidence": np.concatenate(conf) if conf else np.zeros(0),
+        "landmarks": np.concatenate(lms) if lms else np.zeros((0, 5, 2)),
+        "noise": np.concatenate(noise) if noise else np.zeros(0),
+    }
+    if path is not None:
+        path.parent.mkdir(parents=True, exist_ok=True)
+        buf = io.BytesIO()
+        np.savez(buf, key=np.array(key), size=np.array(size), source=np.array(source), **found)
+        atomic_write_bytes(path, buf.getvalue())
+    return {**found, "size": size, "source": source}
+
+
 def faces_in_videos(
     videos: Sequence[str | os.PathLike[str]],
     cameras: Mapping[str, Cameras],
@@ -2244,6 +2327,7 @@ def faces_in_videos(
     progress: bool = True,
     face_options: Any = None,
     interocular: float | None = None,
+    cache_dir: str | os.PathLike[str] | None = None,
     **overrides: Any,
 ) -> VideoFaces:
     """3D faces and exo gaze rays of everyone the wearers' cameras see (Sec 3.2.2), from
@@ -2264,6 +2348,12 @@ def faces_in_videos(
         measured on the faces, whose eyes are taken to be this many metres apart on average
         (``socialcam.faces.INTEROCULAR`` = 0.063 for adults;
         :func:`socialcam.faces.scale_from_faces`); ``None``: the cameras are in metres
+    cache_dir : where each video's detections are kept (``<person>.npz``, as found, before
+        the lens is undone) under a key of the video file (path, size, modification time),
+        the frames searched, ``landmarks``, ``min_face`` and the detector's version: a later
+        call on the same frames reads them instead of detecting again (detection is nearly
+        all of the cost). ``None``: nothing kept. :func:`faces` keeps them in the run
+        folder's ``cache/faces``.
 
     Returns
     -------
@@ -2274,12 +2364,15 @@ def faces_in_videos(
     ValueError
         Fewer than two posed wearers, cameras without times, a video that cannot be read.
     """
-    from socialcam.faces import FaceDetections, detect_faces, reconstruct_faces, scale_from_faces
-    from socialcam.video import open_video
+    from socialcam.faces import FaceDetections, reconstruct_faces, scale_from_faces
 
     if isinstance(videos, (str, os.PathLike)) or not isinstance(videos, Sequence):
         raise ValueError("videos: expected a list of videos (one per wearer)")
     check_bool(progress, "progress")
+    if cache_dir is not None and not isinstance(cache_dir, (str, os.PathLike)):
+        raise ValueError(
+            f"cache_dir: expected a folder path or None, got {type(cache_dir).__name__}"
+        )
     if interocular is not None:
         check_float(interocular, "interocular", min=1e-3, max=1.0)
     names = [Path(p).stem for p in videos]
@@ -2296,36 +2389,22 @@ def faces_in_videos(
         if cam.times is None:
             raise ValueError(f"cameras[{n!r}]: needs times on the common clock")
         local = np.asarray(cam.times) - float(offs.get(n, 0.0))
+        raw = _cached_detections(Path(videos[i]), n, local, landmarks, min_face, progress,
+                                 None if cache_dir is None else Path(cache_dir))  # fmt: skip
+        size, source = raw["size"], raw["source"]
         frames, boxes, conf, lms, noise = [], [], [], [], []
-        size: tuple[int, int] | None = None
-        source = landmarks
-        with open_video(Path(videos[i])) as vid:
-            order = np.argsort(local, kind="stable")
-            stream = frames_at(vid, local[order])
-            if progress:
-                from tqdm.auto import tqdm  # type: ignore[import-untyped]
-
-                stream = tqdm(stream, total=len(order), desc=f"faces {n}", unit="frame")
-            for j, image in stream:
-                k = int(order[j])
-                d = detect_faces(image, min_face=min_face, landmarks=landmarks)
-                size = d.size
-                source = d.landmark_source
-                if not len(d):
-                    continue
-                one = cam[k]  # the lens of this frame: raw pixels → the pinhole K
-                lm = one.undistort_points(d.landmarks.reshape(1, -1, 2))[0].reshape(-1, 5, 2)
-                corners = np.stack([d.box[:, :2], d.box[:, :2] + d.box[:, 2:]], axis=1)
-                c = one.undistort_points(corners.reshape(1, -1, 2))[0].reshape(-1, 2, 2)
-                frames.append(np.full(len(d), k, np.int64))
-                boxes.append(np.c_[c[:, 0], c[:, 1] - c[:, 0]])
-                conf.append(d.confidence)
-                lms.append(lm)
-                noise.append(
-                    np.full(len(d), np.nan) if d.landmark_noise is None else d.landmark_noise
-                )
-        if size is None:
-            raise ValueError(f"videos: no frame of {os.fspath(videos[i])!r} at its posed times")
+        for k in np.unique(raw["frame"]):
+            at = np.flatnonzero(raw["frame"] == k)
+            one = cam[int(k)]  # the lens of this frame: raw pixels → the pinhole K
+            lm = one.undistort_points(raw["landmarks"][at].reshape(1, -1, 2))[0].reshape(-1, 5, 2)
+            box = raw["box"][at]
+            corners = np.stack([box[:, :2], box[:, :2] + box[:, 2:]], axis=1)
+            c = one.undistort_points(corners.reshape(1, -1, 2))[0].reshape(-1, 2, 2)
+            frames.append(np.full(len(at), k, np.int64))
+            boxes.append(np.c_[c[:, 0], c[:, 1] - c[:, 0]])
+            conf.append(raw["confidence"][at])
+            lms.append(lm)
+            noise.append(raw["noise"][at])
         nz = np.concatenate(noise) if noise else np.zeros(0)
         dets.append(
             FaceDetections(
@@ -2526,7 +2605,9 @@ def faces(
     Writes ``faces.csv`` (:func:`faces_csv`), ``faces.json`` (people found, instants per
     person, detections, disagreement per wearer in degrees) and, with ``plots``,
     ``faces_top.png`` (:func:`socialcam.viz.plot_faces_top`) into ``run_dir``. Returns the
-    :class:`VideoFaces` and that report.
+    :class:`VideoFaces` and that report. The detections are kept in ``run_dir/cache/faces``
+    (``faces_in_videos``' ``cache_dir``): another call on the same run (other face
+    options, a scale from the faces, ``repair``) does not run the detector again.
 
     The faces are reconstructed in metres. A run without a metric scale (no floor found, no
     ``known_distance``) is scaled by the faces' eyes when ``interocular`` is given (the
@@ -2594,7 +2675,8 @@ def faces(
     found = faces_in_videos(
         videos, rec.cameras, offsets=offsets, landmarks=landmarks, min_face=min_face,
         progress=progress, face_options=face_options,
-        interocular=None if metric else interocular, **overrides,
+        interocular=None if metric else interocular, cache_dir=out / "cache" / "faces",
+        **overrides,
     )  # fmt: skip
     names = list(found.names)
     s_faces = 1.0 if found.scale is None else float(found.scale.metres_per_unit)
