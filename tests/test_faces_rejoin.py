@@ -294,6 +294,7 @@ def test_faces_of_a_run_repair_a_wrong_join(tmp_path, scene8, circle8, monkeypat
     n_fixed = int(np.isfinite(found.faces.v[..., 0]).sum())
     _, plain = pipeline.faces(run, plots=False, progress=False, repair=False)
     assert "warning" in plain["pose_check"] and "repaired" not in plain["pose_check"]
+    assert "repaired_run" not in plain and not (run / "repaired").exists()  # not left stale
     n_plain = sum(p["instants"] for p in plain["people"])
     assert n_fixed >= 0.95 * n_true and n_plain < 0.8 * n_true, (n_fixed, n_plain, n_true)
     from socialcam.cli import main

@@ -2533,6 +2533,22 @@ def read_gaze_csv(
     return times, gaze
 
 
+#: What :func:`_repaired_run` writes into ``REPAIRED_DIR``.
+REPAIRED_FILES = ("poses.csv", "gaze.csv", "charges.csv", "charges_top.png", "charges_time.png")
+
+
+def _clear_repaired(out: Path) -> None:
+    """Removes the files an earlier :func:`faces` wrote into ``out/repaired`` (and the
+    folder when nothing else is in it)."""
+    d = out / REPAIRED_DIR
+    if not d.is_dir():
+        return
+    for f in REPAIRED_FILES:
+        (d / f).unlink(missing_ok=True)
+    if not any(d.iterdir()):
+        d.rmdir()
+
+
 def _repaired_run(
     out: Path,
     rec: VideoReconstruction,
@@ -2566,6 +2582,7 @@ def _repaired_run(
     )
     cams = {n: c.moved(*motions[n]) if n in motions else c for n, c in rec.cameras.items()}
     fixed = replace(rec, cameras=cams)
+    _clear_repaired(out)
     d = out / REPAIRED_DIR
     d.mkdir(exist_ok=True)
     atomic_write_bytes(d / "poses.csv", poses_csv(fixed).encode())
@@ -2818,6 +2835,8 @@ def faces(
     }
     if motions and (out / "gaze.csv").is_file() and "options" in run_report:
         report["repaired_run"] = _repaired_run(out, rec, run_report, motions)
+    else:  # an earlier call's repaired run no longer holds
+        _clear_repaired(out)
     write_json(out / "faces.json", report)
     if plots:
         from socialcam.io import save_figure
