@@ -19,7 +19,12 @@ each camera (true poses, turned, repaired: ``JoinRepair.motion``), charges as ``
 finds them (default options), scored against the truth (``synth.evaluate.joint_attention``):
 median and p90 error (mm) and the fraction of the looking groups found.
 
-Run: python benches/faces_rejoin.py OUT_DIR [seed ...] [turn=DEG ...] [repair=1 [attention=1]]
+With ``eyes=1`` as well (session 39) the repair also gets each wearer's eye centre in its
+camera's frame as a gaze calibration gives it (``GazeCalibration.p``: the true eye offset
+normal to the primary gaze, plus 1 cm of noise per coordinate, seeded by the circle), and the
+head-turn placement alone is printed both without and with it (``cal``).
+
+Run: python benches/faces_rejoin.py OUT_DIR [seed ...] [turn=DEG ...] [repair=1 [attention=1] [eyes=1]]
 """
 
 from __future__ import annotations
@@ -64,7 +69,12 @@ def _attention(truth, times, motion) -> str:
 
 
 def evaluate(
-    out: Path, seed: int, turns: list[float], repair: bool = False, attention: bool = False
+    out: Path,
+    seed: int,
+    turns: list[float],
+    repair: bool = False,
+    attention: bool = False,
+    eyes: bool = False,
 ) -> None:
     folder = out / f"circle{seed}_8s"
     if (folder / "truth.npz").exists():
@@ -82,11 +92,21 @@ def evaluate(
                for v, c in enumerate(cams)]  # fmt: skip
         t0 = time.perf_counter()
         if repair:
-            j = repair_joins(dets, bad)
+            offsets = None
+            if eyes:
+                rng = np.random.default_rng(seed)
+                pn = np.array([o - o.dot(d) * d for o, d in zip(truth.eye_offset,
+                               truth.primary_dir, strict=True)])  # fmt: skip
+                offsets = pn + rng.normal(0.0, 0.01, pn.shape)
+            j = repair_joins(dets, bad, eye_offsets=offsets)
             dt = time.perf_counter() - t0
             placed = [(g, round(float(np.degrees(a)), 1), ref, round(res, 2))
                       for g, a, _, ref, res in j.placed]  # fmt: skip
             coarse = repair_joins(dets, bad, refine=False)
+            cal = ""
+            if eyes:
+                c2 = repair_joins(dets, bad, refine=False, eye_offsets=offsets)
+                cal = f", head turns alone with the calibration {_errors(c2.cameras, cams)}"
             same = repair_joins(dets, cams)
             moved = [v for v in range(len(cams)) if same.cameras[v] is not cams[v]]
             moved_bad = [v for v in range(len(cams)) if j.cameras[v] is not bad[v]]
@@ -94,6 +114,7 @@ def evaluate(
                   f"{list(j.wrong_before)} after {list(j.wrong_after)}, placed {placed}, "
                   f"unplaced {list(j.unplaced)}; cameras 2, 3 (mm, deg): "
                   f"{_errors(j.cameras, cams)}, head turns alone {_errors(coarse.cameras, cams)}"
+                  f"{cal}"
                   f"; true poses: flagged {list(same.wrong_before)}, moved {moved} "
                   f"({dt:.2f} s)", flush=True)  # fmt: skip
             if attention:
@@ -130,8 +151,9 @@ def main(argv: list[str]) -> None:
     turns = [float(a.split("=", 1)[1]) for a in argv[1:] if a.startswith("turn=")] or [35.0]
     repair = any(a == "repair=1" for a in argv[1:])
     attention = any(a == "attention=1" for a in argv[1:])
+    eyes = any(a == "eyes=1" for a in argv[1:])
     for seed in [int(a) for a in argv[1:] if "=" not in a] or [3]:
-        evaluate(out, seed, turns, repair, attention)
+        evaluate(out, seed, turns, repair, attention, eyes)
 
 
 if __name__ == "__main__":

@@ -110,7 +110,7 @@ def _turn_errors(cams, truth_cams):
     ]  # fmt: skip
 
 
-def test_repair_finds_the_wrong_group_and_puts_it_back(circle8):
+def test_repair_finds_the_wrong_group_and_puts_it_back(circle8, scene8):
     """``repair_joins``: the sightings split the cameras into {0, 1} and {2, 3} (no group
     given), the head turns place {2, 3}, and the faces both pairs see refine it: measured
     centres 2 / 2 mm and orientations 0.05° off (seeds 5, 6, 13, 14: 1-4 mm, ≤ 0.12°)
@@ -138,6 +138,22 @@ def test_repair_finds_the_wrong_group_and_puts_it_back(circle8):
     coarse = repair_joins(dets, _turned(cams, 35.0), refine=False)
     assert [p[3] for p in coarse.placed] == [False]
     assert min(_centre_errors(coarse.cameras, cams)[2:]) > 0.05
+    # the head turns place the wearers' eyes where a gaze calibration puts them (its eye
+    # centre normal to the primary gaze): measured 84 / 85 mm -> 6 / 11 mm here (46
+    # circles with 1 cm of noise on the offsets: median 74 -> 26 mm)
+    tr = scene8.truth
+    pn = np.array([o - o.dot(d) * d for o, d in zip(tr.eye_offset, tr.primary_dir, strict=True)])
+    cal = repair_joins(dets, _turned(cams, 35.0), refine=False, eye_offsets=pn)
+    assert max(_centre_errors(cal.cameras, cams)[2:]) < 0.03, _centre_errors(cal.cameras, cams)
+    part = pn.copy()
+    part[[2, 3]] = np.nan  # the placed wearers' unknown: their camera centres, as without
+    unknown = repair_joins(dets, _turned(cams, 35.0), refine=False, eye_offsets=part)
+    for a, b in zip(unknown.cameras, coarse.cameras, strict=True):
+        np.testing.assert_allclose(a.C, b.C, atol=1e-12)
+    with pytest.raises(ValueError, match="eye_offsets"):
+        repair_joins(dets, cams, eye_offsets=pn[:3])
+    with pytest.raises(ValueError, match="eye_offsets"):
+        repair_joins(dets, cams, eye_offsets=np.full((4, 3), np.inf))
     same = repair_joins(dets, cams)
     assert not same.placed and not same.unplaced and not same.wrong_before
     assert all(a is b for a, b in zip(same.cameras, cams, strict=True))
@@ -253,6 +269,27 @@ def test_faces_of_a_run_repair_a_wrong_join(tmp_path, scene8, circle8, monkeypat
         return folder
 
     run = run_folder(tmp_path / "run", bad, 1.0)
+    # the run's gaze calibration (wearer 1 not calibrated): the repair gets its eye centres
+    from dataclasses import replace
+
+    import socialcam.faces as sf
+    from socialcam.gaze import GazeCalibration
+
+    pn = np.array([o - o.dot(d) * d for o, d in zip(truth.eye_offset, truth.primary_dir,
+                                                     strict=True)])  # fmt: skip
+    stored = {n: {"summary": {}, "calibration": (GazeCalibration.optical_axis() if v == 1 else
+              replace(GazeCalibration.optical_axis(), p=pn[v], calibrated=True)).to_dict()}
+              for v, n in enumerate(names)}  # fmt: skip
+    (run / "cache" / "calibration").mkdir(parents=True)
+    (run / "cache" / "calibration" / "calibration.json").write_text(json.dumps(stored))
+    seen_offsets = []
+    real_repair = sf.repair_joins
+
+    def spy(*a, **k):
+        seen_offsets.append(k.get("eye_offsets"))
+        return real_repair(*a, **k)
+
+    monkeypatch.setattr(sf, "repair_joins", spy)
 
     def detected(videos, cameras, interocular=None, **_):
         c = [cameras[n] for n in names]
@@ -268,6 +305,8 @@ def test_faces_of_a_run_repair_a_wrong_join(tmp_path, scene8, circle8, monkeypat
     found, report = pipeline.faces(run, plots=False, progress=False)
     pc = report["pose_check"]
     assert [r["wearers"] for r in pc["repaired"]] == [names[2:]], pc
+    got = seen_offsets[-1]
+    assert np.isnan(got[1]).all() and np.allclose(np.delete(got, 1, 0), np.delete(pn, 1, 0))
     assert abs(pc["repaired"][0]["turn_deg"] + 35.0) < 0.5 and pc["repaired"][0]["refined_by_faces"]
     assert pc["wrong_pairs_before_repair"] and "warning" not in pc, pc
     dis = {p["name"]: p["ego_exo_disagreement_deg_median"] for p in report["people"]
@@ -309,10 +348,16 @@ def test_faces_of_a_run_repair_a_wrong_join(tmp_path, scene8, circle8, monkeypat
     # repaired map and the cameras returned in metres
     unit = 2.0
     bad_map = [Cameras(c.K, c.R, c.C / unit, c.times) for c in bad]
-    found_m, rep_m = pipeline.faces(run_folder(tmp_path / "map", bad_map, float("nan"), unit),
-                                    plots=False, progress=False, interocular=INTEROCULAR)  # fmt: skip
+    map_run = run_folder(tmp_path / "map", bad_map, float("nan"), unit)
+    in_map = {n: {"summary": {}, "calibration": replace(GazeCalibration.optical_axis(),
+              p=pn[v] / unit, calibrated=True).to_dict()} for v, n in enumerate(names)}  # fmt: skip
+    (map_run / "cache" / "calibration").mkdir(parents=True)
+    (map_run / "cache" / "calibration" / "calibration.json").write_text(json.dumps(in_map))
+    found_m, rep_m = pipeline.faces(map_run, plots=False, progress=False,
+                                    interocular=INTEROCULAR)  # fmt: skip
     assert [r["wearers"] for r in rep_m["pose_check"]["repaired"]] == [names[2:]]
     s = rep_m["scale"]["metres_per_unit"]
+    assert np.allclose(seen_offsets[-1], pn, atol=2e-3), (seen_offsets[-1], pn)  # in metres
     err = [float(np.median(np.linalg.norm(found_m.cameras[n].C - c.C, axis=1)))
            for n, c in zip(names, cams, strict=True)]  # fmt: skip
     assert abs(s / unit - 1) < 0.05 and max(err) < 0.1, (s, err)

@@ -1879,6 +1879,7 @@ def rejoin_by_head_turns(
     agree: float = 5.0,
     max_offset: float = 0.05,
     face_options: FaceOptions | None = None,
+    eye_offsets: npt.ArrayLike | None = None,
 ) -> Rejoin | None:
     """Places the cameras ``group`` into the frame of the cameras ``ref`` when SfM joined
     the two wrongly (:func:`wrong_pairs`), by their wearers' head turns.
@@ -1896,7 +1897,11 @@ def rejoin_by_head_turns(
     degrees (circular rms about its mean), and the face to keep within ``max_offset``
     (metres, median) of a fixed offset from the turned camera centre. The matches must
     agree on the turn within ``agree`` degrees; the translation is the median of the
-    matched faces' eye midpoints minus the turned camera centres. Gravity is shared (both
+    matched faces' eye midpoints minus the turned wearers' eyes: each camera's centre plus
+    its wearer's eye offset (``eye_offsets``, ``(V, 3)`` in each camera's frame and the
+    cameras' unit, a NaN row where unknown: e.g. the gaze calibration's eye centre,
+    ``GazeCalibration.p``; unknown ones count as the camera centre, a head camera sits a
+    few centimetres above the eyes). Gravity is shared (both
     groups are in one gravity-aligned map), so the motion is a turn about the vertical and
     a shift. The cameras are in metres (:func:`reconstruct_faces`' gates).
 
@@ -1920,6 +1925,7 @@ def rejoin_by_head_turns(
     for name, val in (("min_sweep", min_sweep), ("max_spread", max_spread), ("agree", agree),
                       ("max_offset", max_offset)):  # fmt: skip
         check_float(val, name, min=0.0, min_exclusive=True)
+    eyes = _eye_offsets(eye_offsets, len(cameras))
     f3 = reconstruct_faces([detections[i] for i in ref], [cameras[i] for i in ref],
                            options=face_options)  # fmt: skip
     matches: list[tuple[int, int, float, float, int]] = []
@@ -1950,12 +1956,13 @@ def rejoin_by_head_turns(
             spread = float(np.sqrt(np.mean(_wrap(d - m) ** 2)))
             if np.degrees(spread) > max_spread:
                 continue
-            # and the face moves with the camera: a steady offset from the turned centre
-            off = f3.p[seen[ok], k] - c.C[idx[ok]] @ _rotz(m).T
+            # and the face moves with the camera: a steady offset from the turned eyes
+            eye = c.C[idx[ok]] + np.einsum("nji,j->ni", c.R[idx[ok]], eyes[j])
+            off = f3.p[seen[ok], k] - eye @ _rotz(m).T
             if np.median(np.linalg.norm(off - np.median(off, axis=0), axis=1)) > max_offset:
                 continue
             matches.append((int(k), j, m, spread, int(ok.sum())))
-            pairs.append((f3.p[seen[ok], k], c.C[idx[ok]]))
+            pairs.append((f3.p[seen[ok], k], eye))
     if not matches:
         return None
     turns = np.array([m[2] for m in matches])
@@ -1963,12 +1970,24 @@ def rejoin_by_head_turns(
     if np.degrees(np.abs(_wrap(turns - turn))).max() > agree:
         return None
     R = _rotz(turn)
-    # the translation with the common turn: eye midpoints minus turned camera centres
-    t = np.median(np.concatenate([pe - C @ R.T for pe, C in pairs]), axis=0)
+    # the translation with the common turn: eye midpoints minus the turned wearers' eyes
+    t = np.median(np.concatenate([pe - E @ R.T for pe, E in pairs]), axis=0)
     moved = list(cameras)
     for j in group:
         moved[j] = cameras[j].moved(R, t)
     return Rejoin(readonly(R), readonly(np.asarray(t)), turn, tuple(matches), tuple(moved))
+
+
+def _eye_offsets(eye_offsets: npt.ArrayLike | None, V: int) -> FloatArray:
+    """``eye_offsets`` checked: ``(V, 3)``, unknown rows (NaN) and ``None`` as zeros."""
+    if eye_offsets is None:
+        return np.zeros((V, 3))
+    o = np.array(eye_offsets, dtype=np.float64)
+    if o.shape != (V, 3):
+        raise ValueError(f"eye_offsets: expected ({V}, 3) (one per camera), got {o.shape}")
+    if np.isinf(o).any():
+        raise ValueError("eye_offsets: must be finite (NaN rows for unknown)")
+    return np.where(np.isfinite(o).all(axis=1, keepdims=True), o, 0.0)
 
 
 def _rotz(a: float) -> FloatArray:
@@ -2239,6 +2258,7 @@ def repair_joins(
     min_expected: int = 5,
     refine: bool = True,
     face_options: FaceOptions | None = None,
+    eye_offsets: npt.ArrayLike | None = None,
 ) -> JoinRepair:
     """Finds the groups of wearers whose cameras SfM joined wrongly and puts them back, by
     the faces (cameras in metres).
@@ -2251,8 +2271,11 @@ def repair_joins(
     unrefined when they share too few faces), and kept when the sightings between the group
     and the reference then no longer contradict it and no pair of cameras is contradicted
     that was not before. A group that cannot be placed is left where it was and reported.
+    ``eye_offsets``: each wearer's eye in its camera's frame, as
+    :func:`rejoin_by_head_turns` takes them.
     """
     check_bool(refine, "refine")
+    eyes = _eye_offsets(eye_offsets, len(cameras))
     expected, found = wearer_sightings(detections, cameras, min_face=min_face,
                                        face_width=face_width)  # fmt: skip
     before = wrong_pairs(expected, found, min_expected)
@@ -2264,7 +2287,8 @@ def repair_joins(
     for g in groups[1:]:
         if not any((min(i, j), max(i, j)) in before for i in ref for j in g):
             continue
-        r = rejoin_by_head_turns(detections, cams, ref, g, face_options=face_options)
+        r = rejoin_by_head_turns(detections, cams, ref, g, face_options=face_options,
+                                 eye_offsets=eyes)  # fmt: skip
         if r is None:
             unplaced.append(tuple(g))
             continue

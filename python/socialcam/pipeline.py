@@ -2533,6 +2533,26 @@ def read_gaze_csv(
     return times, gaze
 
 
+def _run_eye_offsets(out: Path, names: Sequence[str], unit: float) -> FloatArray:
+    """Each wearer's eye centre in its camera's frame from the run's gaze calibration
+    (``cache/calibration``: ``GazeCalibration.p``), times ``unit`` (the run's unit → the
+    cameras'); a NaN row for a wearer not calibrated. ``(V, 3)`` in ``names`` order."""
+    o = np.full((len(names), 3), np.nan)
+    f = out / "cache" / "calibration" / "calibration.json"
+    try:
+        stored = json.loads(f.read_text()) if f.is_file() else {}
+    except (OSError, ValueError):
+        return o
+    for i, n in enumerate(names):
+        try:
+            cal = GazeCalibration.from_dict(stored[n]["calibration"])
+        except (KeyError, TypeError, ValueError):
+            continue
+        if cal.calibrated and np.isfinite(cal.p).all():
+            o[i] = np.asarray(cal.p) * unit
+    return o
+
+
 #: What :func:`_repaired_run` writes into ``REPAIRED_DIR``.
 REPAIRED_FILES = ("poses.csv", "gaze.csv", "charges.csv", "charges_top.png", "charges_time.png")
 
@@ -2637,8 +2657,10 @@ def faces(
     The wearers' faces also check the cameras' relative poses (the report's ``pose_check``:
     :func:`socialcam.faces.wearer_sightings`). Where they say structure from motion joined
     groups of wearers wrongly, with ``repair`` each group is put back by its wearers' head
-    turns and the faces both sides see (:func:`socialcam.faces.repair_joins`), and the
-    faces are reconstructed again with the moved cameras; ``pose_check["repaired"]`` gives
+    turns and the faces both sides see (:func:`socialcam.faces.repair_joins`; the head
+    turns place each wearer's eyes where the run's gaze calibration puts them relative to
+    its camera, when it was calibrated), and the faces are reconstructed again with the
+    moved cameras; ``pose_check["repaired"]`` gives
     each group moved (turn in degrees, shift in metres) and ``pose_check["unplaced"]`` those
     that could not be. The run's own files (``poses.csv``, ``gaze.csv``, ``charges.csv``)
     keep the poses SfM gave; the ego gaze the faces are compared with moves with its
@@ -2710,7 +2732,8 @@ def faces(
     if repair and before:
         fo = apply_overrides(face_options, FaceOptions, overrides)
         fixed = repair_joins(list(found.detections), [cams_m[n] for n in names],
-                             min_face=min_face, face_options=fo)  # fmt: skip
+                             min_face=min_face, face_options=fo,
+                             eye_offsets=_run_eye_offsets(out, names, s_faces))  # fmt: skip
         if fixed.placed:
             for g, *_ in fixed.placed:
                 for v in g:
