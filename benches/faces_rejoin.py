@@ -22,9 +22,11 @@ median and p90 error (mm) and the fraction of the looking groups found.
 With ``eyes=1`` as well (session 39) the repair also gets each wearer's eye centre in its
 camera's frame as a gaze calibration gives it (``GazeCalibration.p``: the true eye offset
 normal to the primary gaze, plus 1 cm of noise per coordinate, seeded by the circle), and the
-head-turn placement alone is printed both without and with it (``cal``).
+head-turn placement alone is printed both without and with it (``cal``). ``gaze=1`` adds the
+calibration's primary gaze direction (``GazeCalibration.v``: the true one plus 0.005 of noise
+per coordinate, about 0.3°), which the head turns then follow instead of the optical axis.
 
-Run: python benches/faces_rejoin.py OUT_DIR [seed ...] [turn=DEG ...] [repair=1 [attention=1] [eyes=1]]
+Run: python benches/faces_rejoin.py OUT_DIR [seed ...] [turn=DEG ...] [repair=1 [attention=1] [eyes=1 [gaze=1]]]
 """
 
 from __future__ import annotations
@@ -75,6 +77,7 @@ def evaluate(
     repair: bool = False,
     attention: bool = False,
     eyes: bool = False,
+    gaze: bool = False,
 ) -> None:
     folder = out / f"circle{seed}_8s"
     if (folder / "truth.npz").exists():
@@ -98,14 +101,18 @@ def evaluate(
                 pn = np.array([o - o.dot(d) * d for o, d in zip(truth.eye_offset,
                                truth.primary_dir, strict=True)])  # fmt: skip
                 offsets = pn + rng.normal(0.0, 0.01, pn.shape)
-            j = repair_joins(dets, bad, eye_offsets=offsets)
+            directions = None
+            if eyes and gaze:
+                directions = truth.primary_dir + rng.normal(0.0, 0.005, (len(cams), 3))
+            j = repair_joins(dets, bad, eye_offsets=offsets, gaze_directions=directions)
             dt = time.perf_counter() - t0
             placed = [(g, round(float(np.degrees(a)), 1), ref, round(res, 2))
                       for g, a, _, ref, res in j.placed]  # fmt: skip
             coarse = repair_joins(dets, bad, refine=False)
             cal = ""
             if eyes:
-                c2 = repair_joins(dets, bad, refine=False, eye_offsets=offsets)
+                c2 = repair_joins(dets, bad, refine=False, eye_offsets=offsets,
+                                  gaze_directions=directions)  # fmt: skip
                 cal = f", head turns alone with the calibration {_errors(c2.cameras, cams)}"
             same = repair_joins(dets, cams)
             moved = [v for v in range(len(cams)) if same.cameras[v] is not cams[v]]
@@ -152,8 +159,9 @@ def main(argv: list[str]) -> None:
     repair = any(a == "repair=1" for a in argv[1:])
     attention = any(a == "attention=1" for a in argv[1:])
     eyes = any(a == "eyes=1" for a in argv[1:])
+    gaze = any(a == "gaze=1" for a in argv[1:])
     for seed in [int(a) for a in argv[1:] if "=" not in a] or [3]:
-        evaluate(out, seed, turns, repair, attention, eyes)
+        evaluate(out, seed, turns, repair, attention, eyes, gaze)
 
 
 if __name__ == "__main__":

@@ -138,13 +138,17 @@ def test_repair_finds_the_wrong_group_and_puts_it_back(circle8, scene8):
     coarse = repair_joins(dets, _turned(cams, 35.0), refine=False)
     assert [p[3] for p in coarse.placed] == [False]
     assert min(_centre_errors(coarse.cameras, cams)[2:]) > 0.05
-    # the head turns place the wearers' eyes where a gaze calibration puts them (its eye
-    # centre normal to the primary gaze): measured 84 / 85 mm -> 6 / 11 mm here (46
-    # circles with 1 cm of noise on the offsets: median 74 -> 26 mm)
+    # the head turns place the wearers' eyes and primary gaze where a gaze calibration puts
+    # them (its eye centre normal to the primary gaze, its direction): measured 84 / 85 mm
+    # and a turn 0.40 deg off -> 6 / 11 mm and 0.0x deg here (46 circles with 1 cm and 0.3
+    # deg of noise: median 74 -> 19 mm, turn 1.3 -> 0.8 deg)
     tr = scene8.truth
     pn = np.array([o - o.dot(d) * d for o, d in zip(tr.eye_offset, tr.primary_dir, strict=True)])
-    cal = repair_joins(dets, _turned(cams, 35.0), refine=False, eye_offsets=pn)
+    cal = repair_joins(dets, _turned(cams, 35.0), refine=False, eye_offsets=pn,
+                       gaze_directions=tr.primary_dir)  # fmt: skip
     assert max(_centre_errors(cal.cameras, cams)[2:]) < 0.03, _centre_errors(cal.cameras, cams)
+    turn_err = abs(np.degrees(cal.placed[0][1]) + 35.0)
+    assert turn_err < 0.2 < abs(np.degrees(coarse.placed[0][1]) + 35.0), turn_err
     part = pn.copy()
     part[[2, 3]] = np.nan  # the placed wearers' unknown: their camera centres, as without
     unknown = repair_joins(dets, _turned(cams, 35.0), refine=False, eye_offsets=part)
@@ -154,6 +158,10 @@ def test_repair_finds_the_wrong_group_and_puts_it_back(circle8, scene8):
         repair_joins(dets, cams, eye_offsets=pn[:3])
     with pytest.raises(ValueError, match="eye_offsets"):
         repair_joins(dets, cams, eye_offsets=np.full((4, 3), np.inf))
+    with pytest.raises(ValueError, match="gaze_directions"):
+        repair_joins(dets, cams, gaze_directions=np.zeros((4, 3)))
+    with pytest.raises(ValueError, match="gaze_directions"):
+        repair_joins(dets, cams, gaze_directions=np.ones((3, 3)))
     same = repair_joins(dets, cams)
     assert not same.placed and not same.unplaced and not same.wrong_before
     assert all(a is b for a, b in zip(same.cameras, cams, strict=True))
@@ -278,7 +286,8 @@ def test_faces_of_a_run_repair_a_wrong_join(tmp_path, scene8, circle8, monkeypat
     pn = np.array([o - o.dot(d) * d for o, d in zip(truth.eye_offset, truth.primary_dir,
                                                      strict=True)])  # fmt: skip
     stored = {n: {"summary": {}, "calibration": (GazeCalibration.optical_axis() if v == 1 else
-              replace(GazeCalibration.optical_axis(), p=pn[v], calibrated=True)).to_dict()}
+              replace(GazeCalibration.optical_axis(), p=pn[v], v=truth.primary_dir[v],
+                      calibrated=True)).to_dict()}
               for v, n in enumerate(names)}  # fmt: skip
     (run / "cache" / "calibration").mkdir(parents=True)
     (run / "cache" / "calibration" / "calibration.json").write_text(json.dumps(stored))
@@ -286,7 +295,7 @@ def test_faces_of_a_run_repair_a_wrong_join(tmp_path, scene8, circle8, monkeypat
     real_repair = sf.repair_joins
 
     def spy(*a, **k):
-        seen_offsets.append(k.get("eye_offsets"))
+        seen_offsets.append((k.get("eye_offsets"), k.get("gaze_directions")))
         return real_repair(*a, **k)
 
     monkeypatch.setattr(sf, "repair_joins", spy)
@@ -305,8 +314,8 @@ def test_faces_of_a_run_repair_a_wrong_join(tmp_path, scene8, circle8, monkeypat
     found, report = pipeline.faces(run, plots=False, progress=False)
     pc = report["pose_check"]
     assert [r["wearers"] for r in pc["repaired"]] == [names[2:]], pc
-    got = seen_offsets[-1]
-    assert np.isnan(got[1]).all() and np.allclose(np.delete(got, 1, 0), np.delete(pn, 1, 0))
+    for got, want in zip(seen_offsets[-1], (pn, truth.primary_dir), strict=True):
+        assert np.isnan(got[1]).all() and np.allclose(np.delete(got, 1, 0), np.delete(want, 1, 0))
     assert abs(pc["repaired"][0]["turn_deg"] + 35.0) < 0.5 and pc["repaired"][0]["refined_by_faces"]
     assert pc["wrong_pairs_before_repair"] and "warning" not in pc, pc
     dis = {p["name"]: p["ego_exo_disagreement_deg_median"] for p in report["people"]
@@ -357,7 +366,7 @@ def test_faces_of_a_run_repair_a_wrong_join(tmp_path, scene8, circle8, monkeypat
                                     interocular=INTEROCULAR)  # fmt: skip
     assert [r["wearers"] for r in rep_m["pose_check"]["repaired"]] == [names[2:]]
     s = rep_m["scale"]["metres_per_unit"]
-    assert np.allclose(seen_offsets[-1], pn, atol=2e-3), (seen_offsets[-1], pn)  # in metres
+    assert np.allclose(seen_offsets[-1][0], pn, atol=2e-3), (seen_offsets[-1], pn)  # metres
     err = [float(np.median(np.linalg.norm(found_m.cameras[n].C - c.C, axis=1)))
            for n, c in zip(names, cams, strict=True)]  # fmt: skip
     assert abs(s / unit - 1) < 0.05 and max(err) < 0.1, (s, err)

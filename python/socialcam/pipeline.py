@@ -2533,24 +2533,27 @@ def read_gaze_csv(
     return times, gaze
 
 
-def _run_eye_offsets(out: Path, names: Sequence[str], unit: float) -> FloatArray:
-    """Each wearer's eye centre in its camera's frame from the run's gaze calibration
-    (``cache/calibration``: ``GazeCalibration.p``), times ``unit`` (the run's unit → the
-    cameras'); a NaN row for a wearer not calibrated. ``(V, 3)`` in ``names`` order."""
+def _run_eyes(out: Path, names: Sequence[str], unit: float) -> tuple[FloatArray, FloatArray]:
+    """Each wearer's eye centre and primary gaze direction in its camera's frame from the
+    run's gaze calibration (``cache/calibration``: ``GazeCalibration.p`` times ``unit``,
+    the run's unit → the cameras', and ``GazeCalibration.v``); NaN rows for a wearer not
+    calibrated. Two ``(V, 3)`` arrays in ``names`` order."""
     o = np.full((len(names), 3), np.nan)
+    d = np.full((len(names), 3), np.nan)
     f = out / "cache" / "calibration" / "calibration.json"
     try:
         stored = json.loads(f.read_text()) if f.is_file() else {}
     except (OSError, ValueError):
-        return o
+        return o, d
     for i, n in enumerate(names):
         try:
             cal = GazeCalibration.from_dict(stored[n]["calibration"])
         except (KeyError, TypeError, ValueError):
             continue
-        if cal.calibrated and np.isfinite(cal.p).all():
+        if cal.calibrated and np.isfinite(cal.p).all() and np.isfinite(cal.v).all():
             o[i] = np.asarray(cal.p) * unit
-    return o
+            d[i] = cal.v
+    return o, d
 
 
 #: What :func:`_repaired_run` writes into ``REPAIRED_DIR``.
@@ -2658,8 +2661,8 @@ def faces(
     :func:`socialcam.faces.wearer_sightings`). Where they say structure from motion joined
     groups of wearers wrongly, with ``repair`` each group is put back by its wearers' head
     turns and the faces both sides see (:func:`socialcam.faces.repair_joins`; the head
-    turns place each wearer's eyes where the run's gaze calibration puts them relative to
-    its camera, when it was calibrated), and the faces are reconstructed again with the
+    turns place each wearer's eyes and primary gaze where the run's gaze calibration puts
+    them relative to its camera, when it was calibrated), and the faces are reconstructed again with the
     moved cameras; ``pose_check["repaired"]`` gives
     each group moved (turn in degrees, shift in metres) and ``pose_check["unplaced"]`` those
     that could not be. The run's own files (``poses.csv``, ``gaze.csv``, ``charges.csv``)
@@ -2731,9 +2734,10 @@ def faces(
     motions: dict[str, tuple[FloatArray, FloatArray]] = {}  # person → (R, t), run's unit
     if repair and before:
         fo = apply_overrides(face_options, FaceOptions, overrides)
+        eyes, forward = _run_eyes(out, names, s_faces)
         fixed = repair_joins(list(found.detections), [cams_m[n] for n in names],
-                             min_face=min_face, face_options=fo,
-                             eye_offsets=_run_eye_offsets(out, names, s_faces))  # fmt: skip
+                             min_face=min_face, face_options=fo, eye_offsets=eyes,
+                             gaze_directions=forward)  # fmt: skip
         if fixed.placed:
             for g, *_ in fixed.placed:
                 for v in g:
