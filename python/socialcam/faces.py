@@ -1896,7 +1896,7 @@ def rejoin_by_head_turns(
     both headings to sweep ``min_sweep`` degrees (a still face matches any wearer that
     turns little), correlated (≥ 0.9), their difference steady within ``max_spread``
     degrees (circular rms about its mean), and the face to keep within ``max_offset``
-    (metres, median) of a fixed offset from the turned camera centre. The matches must
+    (metres, median) of a fixed offset from the wearer's turned eyes. The matches must
     agree on the turn within ``agree`` degrees; the translation is the median of the
     matched faces' eye midpoints minus the turned wearers' eyes: each camera's centre plus
     its wearer's eye offset (``eye_offsets``, ``(V, 3)`` in each camera's frame and the
