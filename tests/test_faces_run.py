@@ -75,10 +75,10 @@ def test_frames_are_the_posed_times_on_the_videos_clock(scene, found):
 
 
 def test_detections_are_kept_and_read_again(tmp_path, scene, found, cache, monkeypatch):
-    """``faces_in_videos(cache_dir=...)`` keeps each video's detections: a second call on
-    the same frames reads them (the detector is not run: here it would raise) and gives the
-    same faces; other frames, another ``min_face``, a touched video file or an unreadable
-    file run the detector again."""
+    """``faces_in_videos(cache_dir=...)`` keeps each video's detections per frame time: a
+    second call on the same frames, or on some of them, reads them (the detector is not
+    run: here it would raise) and gives the same faces; frames not searched before, another
+    ``min_face``, a touched video file or an unreadable file run the detector again."""
     import os
 
     import socialcam.faces as sf
@@ -105,8 +105,14 @@ def test_detections_are_kept_and_read_again(tmp_path, scene, found, cache, monke
     with pytest.raises(Detected):
         faces_in_videos(scene.videos, cams, progress=False, cache_dir=kept, min_face=14.0)
     first = {n: c[: len(c) // 2] for n, c in cams.items()}
-    with pytest.raises(Detected):
-        faces_in_videos(scene.videos, first, progress=False, cache_dir=kept)
+    half = faces_in_videos(scene.videos, first, progress=False, cache_dir=kept)
+    for a, b in zip(half.detections, found.detections, strict=True):
+        some = b.frame < a.n_frames
+        np.testing.assert_array_equal(a.frame, b.frame[some])
+        np.testing.assert_array_equal(a.landmarks, b.landmarks[some])
+    later = {n: Cameras(c.K, c.R, c.C, c.times + 0.05) for n, c in cams.items()}
+    with pytest.raises(Detected):  # between the frames searched: new times
+        faces_in_videos(scene.videos, later, progress=False, cache_dir=kept)
     (kept / f"{tr.names[0]}.npz").write_bytes(b"not an npz")
     with pytest.raises(Detected):
         faces_in_videos(scene.videos, cams, progress=False, cache_dir=kept)

@@ -336,7 +336,7 @@ def _face_scale(
     try:
         found = faces_in_videos(
             [v for v in videos if Path(v).stem in sample], sample, offsets=offsets,
-            interocular=interocular, progress=progress,
+            interocular=interocular, progress=progress, cache_dir=cache.parent / "faces",
         )  # fmt: skip
         fs = found.scale
         result.update(
@@ -2236,16 +2236,18 @@ class VideoFaces:
 
 #: Version of what :func:`faces_in_videos` keeps per video (``cache_dir``): raise it when
 #: the detector or what is stored changes.
-DETECTIONS_CACHE_VERSION = 1
+DETECTIONS_CACHE_VERSION = 2
 
 
-def _detections_key(video: Path, local: FloatArray, landmarks: str, min_face: float) -> str:
+def _detections_key(video: Path, landmarks: str, min_face: float) -> str:
     st = os.stat(video)
     h = hashlib.sha256()
     h.update(f"{os.path.abspath(video)}|{st.st_size}|{st.st_mtime_ns}|{landmarks}|"
              f"{float(min_face)!r}|{DETECTIONS_CACHE_VERSION}\n".encode())  # fmt: skip
-    h.update(np.round(np.asarray(local, np.float64), 6).tobytes())
     return h.hexdigest()[:16]
+
+
+_DETECTION_FIELDS = ("time", "box", "confidence", "landmarks", "noise")
 
 
 def _cached_detections(
@@ -2260,61 +2262,81 @@ def _cached_detections(
     """The faces found in ``video`` at the local times ``local`` (one entry per frame of
     the camera, in its order), as the detector gives them (distorted pixels): ``frame``
     (the camera frame of each detection), ``box``, ``confidence``, ``landmarks``, ``noise``
-    (NaN: the source's default), ``size`` and ``source``; read from ``cache_dir`` when it
-    holds them under the same key."""
+    (NaN: the source's default), ``size`` and ``source``. ``cache_dir`` keeps what was
+    found per frame time under a key of the video file and the detector's settings: only
+    the times not searched before are searched (and added)."""
     from socialcam.faces import detect_faces
     from socialcam.video import open_video
 
-    key = _detections_key(video, local, landmarks, min_face)
+    key = _detections_key(video, landmarks, min_face)
+    tq = np.round(np.asarray(local, np.float64), 6)
     path = None if cache_dir is None else cache_dir / f"{name}.npz"
+    kept: dict[str, Any] | None = None
     if path is not None and path.is_file():
         try:
             with np.load(path, allow_pickle=False) as z:
                 if str(z["key"]) == key:
-                    out: dict[str, Any] = {k: z[k] for k in ("frame", "box", "confidence",
-                                                            "landmarks", "noise")}  # fmt: skip
-                    out["size"] = (int(z["size"][0]), int(z["size"][1]))
-                    out["source"] = str(z["source"])
-                    return out
+                    kept = {k: z[k] for k in (*_DETECTION_FIELDS, "searched")}
+                    kept["size"] = (int(z["size"][0]), int(z["size"][1]))
+                    kept["source"] = str(z["source"])
         except (OSError, ValueError, KeyError):
-            pass  # unreadable: detected again and rewritten
-    frames, boxes, conf, lms, noise = [], [], [], [], []
-    size: tuple[int, int] | None = None
-    source = landmarks
-    with open_video(video) as vid:
-        order = np.argsort(local, kind="stable")
-        stream = frames_at(vid, local[order])
-        if progress:
-            from tqdm.auto import tqdm  # type: ignore[import-untyped]
+            kept = None  # unreadable: searched again and rewritten
+    if kept is None:
+        kept = {
+            "time": np.zeros(0), "box": np.zeros((0, 4)), "confidence": np.zeros(0),
+            "landmarks": np.zeros((0, 5, 2)), "noise": np.zeros(0), "searched": np.zeros(0),
+            "size": None, "source": landmarks,
+        }  # fmt: skip
+    todo = np.flatnonzero(~np.isin(tq, kept["searched"]))
+    if len(todo):
+        times, boxes, conf, lms, noise, searched = [], [], [], [], [], []
+        with open_video(video) as vid:
+            order = todo[np.argsort(local[todo], kind="stable")]
+            stream = frames_at(vid, local[order])
+            if progress:
+                from tqdm.auto import tqdm  # type: ignore[import-untyped]
 
-            stream = tqdm(stream, total=len(order), desc=f"faces {name}", unit="frame")
-        for j, image in stream:
-            k = int(order[j])
-            d = detect_faces(image, min_face=min_face, landmarks=landmarks)
-            size = d.size
-            source = d.landmark_source
-            if not len(d):
-                continue
-            frames.append(np.full(len(d), k, np.int64))
-            boxes.append(d.box)
-            conf.append(d.confidence)
-            lms.append(d.landmarks)
-            noise.append(np.full(len(d), np.nan) if d.landmark_noise is None else d.landmark_noise)
-    if size is None:
+                stream = tqdm(stream, total=len(order), desc=f"faces {name}", unit="frame")
+            for j, image in stream:
+                k = int(order[j])
+                d = detect_faces(image, min_face=min_face, landmarks=landmarks)
+                kept["size"], kept["source"] = d.size, d.landmark_source
+                searched.append(tq[k])
+                if not len(d):
+                    continue
+                times.append(np.full(len(d), tq[k]))
+                boxes.append(d.box)
+                conf.append(d.confidence)
+                lms.append(d.landmarks)
+                noise.append(
+                    np.full(len(d), np.nan) if d.landmark_noise is None else d.landmark_noise
+                )
+        for f, new in (("time", times), ("box", boxes), ("confidence", conf),
+                       ("landmarks", lms), ("noise", noise)):  # fmt: skip
+            kept[f] = np.concatenate([kept[f], *new])
+        kept["searched"] = np.concatenate([kept["searched"], np.array(searched)])
+        if path is not None and kept["size"] is not None:
+            path.parent.mkdir(parents=True, exist_ok=True)
+            buf = io.BytesIO()
+            arrays = {f: kept[f] for f in (*_DETECTION_FIELDS, "searched")}
+            np.savez(buf, key=np.array(key), size=np.array(kept["size"]),
+                     source=np.array(kept["source"]), **arrays)  # fmt: skip
+            atomic_write_bytes(path, buf.getvalue())
+    if kept["size"] is None or not np.isin(tq, kept["searched"]).any():
         raise ValueError(f"videos: no frame of {os.fspath(video)!r} at its posed times")
-    found: dict[str, Any] = {
-        "frame": np.concatenate(frames) if frames else np.zeros(0, np.int64),
-        "box": np.concatenate(boxes) if boxes else np.zeros((0, 4)),
-        "confidence": np.concatenate(conf) if conf else np.zeros(0),
-        "landmarks": np.concatenate(lms) if lms else np.zeros((0, 5, 2)),
-        "noise": np.concatenate(noise) if noise else np.zeros(0),
+    frame_of: dict[float, int] = {}
+    for k, t in enumerate(tq.tolist()):
+        frame_of.setdefault(t, k)
+    sel = np.flatnonzero(np.isin(kept["time"], tq))
+    return {
+        "frame": np.array([frame_of[t] for t in kept["time"][sel].tolist()], np.int64),
+        "box": kept["box"][sel],
+        "confidence": kept["confidence"][sel],
+        "landmarks": kept["landmarks"][sel],
+        "noise": kept["noise"][sel],
+        "size": kept["size"],
+        "source": kept["source"],
     }
-    if path is not None:
-        path.parent.mkdir(parents=True, exist_ok=True)
-        buf = io.BytesIO()
-        np.savez(buf, key=np.array(key), size=np.array(size), source=np.array(source), **found)
-        atomic_write_bytes(path, buf.getvalue())
-    return {**found, "size": size, "source": source}
 
 
 def faces_in_videos(
@@ -2349,11 +2371,11 @@ def faces_in_videos(
         (``socialcam.faces.INTEROCULAR`` = 0.063 for adults;
         :func:`socialcam.faces.scale_from_faces`); ``None``: the cameras are in metres
     cache_dir : where each video's detections are kept (``<person>.npz``, as found, before
-        the lens is undone) under a key of the video file (path, size, modification time),
-        the frames searched, ``landmarks``, ``min_face`` and the detector's version: a later
-        call on the same frames reads them instead of detecting again (detection is nearly
-        all of the cost). ``None``: nothing kept. :func:`faces` keeps them in the run
-        folder's ``cache/faces``.
+        the lens is undone) per frame time, under a key of the video file (path, size,
+        modification time), ``landmarks``, ``min_face`` and the detector's version: a later
+        call reads the frames searched before and searches only the others (detection is
+        nearly all of the cost). ``None``: nothing kept. :func:`faces` and ``poses``'
+        scale from the faces keep them in the run folder's ``cache/faces``.
 
     Returns
     -------
