@@ -2224,9 +2224,7 @@ class JoinRepair:
             raise ValueError(f"camera: {camera} is not one of the {len(self.cameras)} cameras")
         for g, turn, shift, _, _ in self.placed:
             if camera in g:
-                c, s = np.cos(turn), np.sin(turn)
-                R = np.array([[c, -s, 0.0], [s, c, 0.0], [0.0, 0.0, 1.0]])
-                return readonly(R), readonly(np.array(shift, dtype=np.float64))
+                return readonly(_rotz(turn)), readonly(np.array(shift, dtype=np.float64))
         return readonly(np.eye(3)), readonly(np.zeros(3))
 
 

@@ -738,6 +738,14 @@ def _hash(*parts: Any) -> str:
     ).hexdigest()[:16]
 
 
+def _write_npz(path: Path, **arrays: Any) -> None:
+    """``np.savez`` written atomically (the folder made if needed)."""
+    path.parent.mkdir(parents=True, exist_ok=True)
+    buf = io.BytesIO()
+    np.savez(buf, **arrays)
+    atomic_write_bytes(path, buf.getvalue())
+
+
 class _Cache:
     """``DIR/cache/<stage>``: ``key.txt`` written after the stage's data, so a stage that
     crashed or was interrupted has no key and reruns."""
@@ -768,9 +776,7 @@ class _Cache:
         return json.loads((self.dir / name).read_text())
 
     def write_npz(self, name: str, **arrays: Any) -> None:
-        buf = io.BytesIO()
-        np.savez(buf, **arrays)
-        atomic_write_bytes(self.dir / name, buf.getvalue())
+        _write_npz(self.dir / name, **arrays)
 
     def read_npz(self, name: str) -> dict[str, np.ndarray]:
         with np.load(self.dir / name, allow_pickle=False) as z:
@@ -2316,12 +2322,9 @@ def _cached_detections(
             kept[f] = np.concatenate([kept[f], *new])
         kept["searched"] = np.concatenate([kept["searched"], np.array(searched)])
         if path is not None and kept["size"] is not None:
-            path.parent.mkdir(parents=True, exist_ok=True)
-            buf = io.BytesIO()
             arrays = {f: kept[f] for f in (*_DETECTION_FIELDS, "searched")}
-            np.savez(buf, key=np.array(key), size=np.array(kept["size"]),
-                     source=np.array(kept["source"]), **arrays)  # fmt: skip
-            atomic_write_bytes(path, buf.getvalue())
+            _write_npz(path, key=np.array(key), size=np.array(kept["size"]),
+                       source=np.array(kept["source"]), **arrays)  # fmt: skip
     if kept["size"] is None or not np.isin(tq, kept["searched"]).any():
         raise ValueError(f"videos: no frame of {os.fspath(video)!r} at its posed times")
     frame_of: dict[float, int] = {}
@@ -2514,12 +2517,9 @@ def _scale_check(f3: Any, interocular: float | None = None) -> dict[str, Any]:
 REPAIRED_DIR = "repaired"
 
 
-def read_gaze_csv(
-    path: str | os.PathLike[str], names: Sequence[str], fps: float
-) -> tuple[FloatArray, dict[str, tuple[FloatArray, FloatArray, FloatArray]]]:
-    """``gaze.csv`` (:func:`gaze_csv`) back into arrays: the output times (multiples of
-    ``1/fps`` from the first row's to the last's) and per person of ``names`` found in it
-    ``(p (T, 3), v (T, 3), h (T,))``, NaN where it has no row."""
+def _gaze_rows(path: str | os.PathLike[str], names: Sequence[str]) -> dict[str, FloatArray]:
+    """The rows of ``gaze.csv`` per person of ``names`` found in it: ``(N, 8)`` arrays of
+    ``time, px, py, pz, vx, vy, vz, h`` in the file's order."""
     rows: dict[str, list[list[float]]] = {}
     lines = Path(path).read_text().splitlines()
     if not lines or lines[0] != GAZE_HEADER:
@@ -2533,9 +2533,18 @@ def read_gaze_csv(
                 rows.setdefault(c[0], []).append([float(x) for x in c[1:9]])
             except ValueError as exc:
                 raise ValueError(f"path: {path} line {i}: {exc}") from None
-    if not rows:
+    return {n: np.array(r) for n, r in rows.items()}
+
+
+def read_gaze_csv(
+    path: str | os.PathLike[str], names: Sequence[str], fps: float
+) -> tuple[FloatArray, dict[str, tuple[FloatArray, FloatArray, FloatArray]]]:
+    """``gaze.csv`` (:func:`gaze_csv`) back into arrays: the output times (multiples of
+    ``1/fps`` from the first row's to the last's) and per person of ``names`` found in it
+    ``(p (T, 3), v (T, 3), h (T,))``, NaN where it has no row."""
+    arrs = _gaze_rows(path, names)
+    if not arrs:
         return np.zeros(0), {}
-    arrs = {n: np.array(r) for n, r in rows.items()}
     ks = {n: np.rint(a[:, 0] * fps).astype(np.int64) for n, a in arrs.items()}
     k0 = min(int(k.min()) for k in ks.values())
     k1 = max(int(k.max()) for k in ks.values())
@@ -2786,13 +2795,8 @@ def faces(
     # ego (gaze.csv) against exo per wearer, at the instants both exist
     ego: dict[str, dict[float, tuple[np.ndarray, float]]] = {}
     if (out / "gaze.csv").is_file():
-        rows = (out / "gaze.csv").read_text().splitlines()[1:]
-        for r in rows:
-            c = r.split(",")
-            ego.setdefault(c[0], {})[round(float(c[1]), 3)] = (
-                np.array([float(x) for x in c[5:8]]),
-                float(c[8]),
-            )
+        for n, a in _gaze_rows(out / "gaze.csv", names).items():
+            ego[n] = {round(float(r[0]), 3): (r[4:7], float(r[7])) for r in a}
     V = len(names)
     people = []
     io_cols, io_d = interocular_distances(f3, 1)
