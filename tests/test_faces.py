@@ -586,6 +586,47 @@ def test_a_face_behind_a_wearer_is_not_claimed_by_the_wearer():
     assert len(f2.person) == 0 and all((d == -1).all() for d in f2.detection_person)
 
 
+
+def test_a_camera_behind_a_wearer_gives_it_no_face():
+    """``anchor_facing``: camera 2 stands behind wearer 0 and sees a person further along its
+    line of sight through wearer 0's head, placed (a copy of wearer 0's face 1.6× as far
+    from camera 2) so that camera 2 sees exactly what wearer 0's face would look like from
+    there: that detection and camera 1's view of wearer 0 triangulate to wearer 0's face
+    and pass every reprojection test (what never-seen circle 250 did, with a phantom
+    turned 180°). Camera 2 looks at wearer 0 from 180° off its head camera's axis, so the
+    wearer does not claim it, and with camera 1 alone the face is not reconstructed; with
+    ``anchor_facing=180`` (no gate) it is, from the wrong pair."""
+    T = 3
+    K = np.array([[830.0, 0, 639.5], [0, 830.0, 479.5], [0, 0, 1]])
+    C0 = np.array([0.0, 0.0, 1.68])
+    c_face = np.array([0.03, 0.0, 1.58])
+    C2 = np.array([-1.0, 0.05, 1.62])
+    L0 = _face(c_face, 0.0)
+    L = {0: L0, 1: C2 + 1.6 * (L0 - C2)}
+    spots = [
+        (C0, C0 + np.array([1.0, 0.0, 0.0]), ()),  # wearer 0's head camera
+        (np.array([2.5, 0.9, 1.6]), c_face, (0,)),
+        (C2, c_face, (1,)),  # behind wearer 0
+    ]
+    rng = np.random.default_rng(4)
+    cams, dets = [], []
+    for C, at, seen in spots:
+        R = look_at(np.tile(C, (T, 1)), at)
+        cams.append(Cameras(np.tile(K, (T, 1, 1)), R, np.tile(C, (T, 1)), np.arange(T) / 15.0))
+        lm = np.array([_project(K, R[0], C, L[p])[0] for _t in range(T) for p in seen])
+        lm = (lm + 0.5 * rng.normal(size=lm.shape)).reshape(-1, 5, 2)
+        side = 2.0 * np.linalg.norm(lm[:, 1] - lm[:, 0], axis=1)
+        box = np.c_[lm.min(axis=1) - 5, side, side]
+        fr = np.repeat(np.arange(T), len(seen))
+        dets.append(FaceDetections(fr, box, np.ones(len(fr)), lm, T, (1280, 960)))
+    gated = reconstruct_faces(dets, cams)
+    assert len(gated.person) == 0 and all((d == -1).all() for d in gated.detection_person)
+    open_ = reconstruct_faces(dets, cams, anchor_facing=180.0)
+    j = int(np.nonzero(open_.person == 0)[0][0])
+    assert (open_.detection_person[2] == j).all() and (open_.views[:, j] == 2).all()
+    with pytest.raises(ValueError, match="anchor_facing"):
+        reconstruct_faces(dets, cams, anchor_facing=0.0)
+
 def test_bad_input():
     w = _World(5, V=3, P=2, T=4)
     none = (np.zeros(0, np.int64), np.zeros((0, 4)), np.zeros(0), np.zeros((0, 5, 2)))
