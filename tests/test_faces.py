@@ -586,7 +586,6 @@ def test_a_face_behind_a_wearer_is_not_claimed_by_the_wearer():
     assert len(f2.person) == 0 and all((d == -1).all() for d in f2.detection_person)
 
 
-
 def test_a_camera_behind_a_wearer_gives_it_no_face():
     """``anchor_facing``: camera 2 stands behind wearer 0 and sees a person further along its
     line of sight through wearer 0's head, placed (a copy of wearer 0's face 1.6× as far
@@ -626,6 +625,7 @@ def test_a_camera_behind_a_wearer_gives_it_no_face():
     assert (open_.detection_person[2] == j).all() and (open_.views[:, j] == 2).all()
     with pytest.raises(ValueError, match="anchor_facing"):
         reconstruct_faces(dets, cams, anchor_facing=0.0)
+
 
 def test_bad_input():
     w = _World(5, V=3, P=2, T=4)
