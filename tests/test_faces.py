@@ -623,6 +623,13 @@ def test_a_camera_behind_a_wearer_gives_it_no_face():
     open_ = reconstruct_faces(dets, cams, anchor_facing=180.0)
     j = int(np.nonzero(open_.person == 0)[0][0])
     assert (open_.detection_person[2] == j).all() and (open_.views[:, j] == 2).all()
+    # camera 2's view the wearer's only claim: the group is left empty, nobody is made
+    e = dets[1]
+    dets[1] = FaceDetections(e.frame[:0], e.box[:0], e.confidence[:0], e.landmarks[:0], T,
+                             (1280, 960))  # fmt: skip
+    for single_view in (False, True):
+        alone = reconstruct_faces(dets, cams, single_view=single_view)
+        assert len(alone.person) == 0 and (alone.detection_person[2] == -1).all()
     with pytest.raises(ValueError, match="anchor_facing"):
         reconstruct_faces(dets, cams, anchor_facing=0.0)
 

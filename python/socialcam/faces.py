@@ -1304,6 +1304,21 @@ def _nearest_frames(frame_times: Any, times: FloatArray, tol: float) -> IntArray
     return np.where(np.abs(ct[best] - times) <= tol, best, -1).astype(np.int64)
 
 
+def _every_group(
+    X: FloatArray, S: FloatArray, nviews: IntArray, n: int
+) -> tuple[FloatArray, FloatArray, IntArray]:
+    """``face_triangulate``'s outputs for ``n`` groups: the last groups, left without a member
+    (by the facing gate or the reprojection test), get NaN landmarks and no views."""
+    pad = n - len(nviews)
+    if pad <= 0:
+        return X, S, nviews
+    return (
+        np.concatenate([X, np.full((pad, 5, 3), np.nan)]),
+        np.concatenate([S, np.full((pad, 5), np.nan)]),
+        np.concatenate([nviews, np.zeros(pad, np.asarray(nviews).dtype)]),
+    )
+
+
 def _facing_gate(
     grp: IntArray,
     g_anchor: IntArray,
@@ -1577,6 +1592,7 @@ def reconstruct_faces(
         X, S, _rms, nviews = _core.face_triangulate(
             cams_t[0], cams_t[1], cams_t[2], local[slot_[rows_t]], lm_[rows_t], sigma[rows_t], grp
         )
+        X, S, nviews = _every_group(X, S, nviews, len(g_anchor))
         if anchors:  # the anchored groups pass the reprojection test of the RANSAC groups
             grp, changed = _anchored_reprojection_test(
                 cams_t, local[slot_[rows_t]], lm_[rows_t], size_[rows_t], sigma[rows_t], grp,
@@ -1587,11 +1603,7 @@ def reconstruct_faces(
                     cams_t[0], cams_t[1], cams_t[2], local[slot_[rows_t]], lm_[rows_t],
                     sigma[rows_t], grp,
                 )  # fmt: skip
-                if len(nviews) < len(g_anchor):  # the last groups lost every member
-                    pad = len(g_anchor) - len(nviews)
-                    X = np.concatenate([X, np.full((pad, 5, 3), np.nan)])
-                    S = np.concatenate([S, np.full((pad, 5), np.nan)])
-                    nviews = np.concatenate([nviews, np.zeros(pad, nviews.dtype)])
+                X, S, nviews = _every_group(X, S, nviews, len(g_anchor))
         claimed: set[int] = set()
         # faces seen by several cameras first (anchored before RANSAC groups), then the
         # anchored faces seen by one camera
