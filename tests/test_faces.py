@@ -587,14 +587,14 @@ def test_a_face_behind_a_wearer_is_not_claimed_by_the_wearer():
 
 
 def test_a_camera_behind_a_wearer_gives_it_no_face():
-    """``anchor_facing``: camera 2 stands behind wearer 0 and sees a person further along its
+    """``anchor_facing_deg``: camera 2 stands behind wearer 0 and sees a person further along its
     line of sight through wearer 0's head, placed (a copy of wearer 0's face 1.6× as far
     from camera 2) so that camera 2 sees exactly what wearer 0's face would look like from
     there: that detection and camera 1's view of wearer 0 triangulate to wearer 0's face
     and pass every reprojection test (what never-seen circle 250 did, with a phantom
     turned 180°). Camera 2 looks at wearer 0 from 180° off its head camera's axis, so the
     wearer does not claim it, and with camera 1 alone the face is not reconstructed; with
-    ``anchor_facing=180`` (no gate) it is, from the wrong pair."""
+    ``anchor_facing_deg=180`` (no gate) it is, from the wrong pair."""
     T = 3
     K = np.array([[830.0, 0, 639.5], [0, 830.0, 479.5], [0, 0, 1]])
     C0 = np.array([0.0, 0.0, 1.68])
@@ -620,7 +620,7 @@ def test_a_camera_behind_a_wearer_gives_it_no_face():
         dets.append(FaceDetections(fr, box, np.ones(len(fr)), lm, T, (1280, 960)))
     gated = reconstruct_faces(dets, cams)
     assert len(gated.person) == 0 and all((d == -1).all() for d in gated.detection_person)
-    open_ = reconstruct_faces(dets, cams, anchor_facing=180.0)
+    open_ = reconstruct_faces(dets, cams, anchor_facing_deg=180.0)
     j = int(np.nonzero(open_.person == 0)[0][0])
     assert (open_.detection_person[2] == j).all() and (open_.views[:, j] == 2).all()
     # camera 2's view the wearer's only claim: the group is left empty, nobody is made
@@ -630,8 +630,8 @@ def test_a_camera_behind_a_wearer_gives_it_no_face():
     for single_view in (False, True):
         alone = reconstruct_faces(dets, cams, single_view=single_view)
         assert len(alone.person) == 0 and (alone.detection_person[2] == -1).all()
-    with pytest.raises(ValueError, match="anchor_facing"):
-        reconstruct_faces(dets, cams, anchor_facing=0.0)
+    with pytest.raises(ValueError, match="anchor_facing_deg"):
+        reconstruct_faces(dets, cams, anchor_facing_deg=0.0)
 
 
 def test_bad_input():

@@ -522,7 +522,7 @@ class FaceOptions:
     min_threshold : smallest reprojection threshold, pixels
     anchor_gate : a wearer's head camera claims a detection whose eye midpoint lies within
         this distance (metres, at the camera's depth) of the camera centre's projection
-    anchor_facing : degrees; a wearer's head camera claims no detection of a camera more
+    anchor_facing_deg : degrees; a wearer's head camera claims no detection of a camera more
         than this far from where it looks (the angle between its optical axis and the
         direction to that camera): a face is not seen from behind its own plane, and what
         such a camera shows next to the wearer's head is someone else. On the rendered
@@ -653,7 +653,7 @@ class FaceOptions:
     rel_threshold: float = 0.1
     min_threshold: float = 1.5
     anchor_gate: float = 0.25
-    anchor_facing: float = 100.0
+    anchor_facing_deg: float = 100.0
     interocular: tuple[float, float] = (0.045, 0.085)
     face_shape: tuple[float, float] = (0.5, 1.6)
     landmark_noise: float | None = None
@@ -690,7 +690,9 @@ class FaceOptions:
             check_float(self.landmark_noise, "landmark_noise", min=0.0)
         if self.turn_rate is not None:
             check_float(self.turn_rate, "turn_rate", min=0.0, min_exclusive=True)
-        check_float(self.anchor_facing, "anchor_facing", min=0.0, max=180.0, min_exclusive=True)
+        check_float(
+            self.anchor_facing_deg, "anchor_facing_deg", min=0.0, max=180.0, min_exclusive=True
+        )
         if self.rigid_turn_rate is not None:
             check_float(self.rigid_turn_rate, "rigid_turn_rate", min=0.0, min_exclusive=True)
         if self.rigid_turn_accel is not None:
@@ -1330,7 +1332,7 @@ def _facing_gate(
     C: FloatArray,
     facing: float,
 ) -> IntArray:
-    """``FaceOptions.anchor_facing``: the detections (cameras ``slots``, groups ``grp``) that
+    """``FaceOptions.anchor_facing_deg``: the detections (cameras ``slots``, groups ``grp``) that
     a wearer's anchor (``a_who[g_anchor[g]] < V``; its camera at ``wearer_slot[v]``) claimed
     from a camera more than ``facing`` degrees off the wearer camera's optical axis leave
     its group (−1). Returns the new ``grp``."""
@@ -1588,7 +1590,7 @@ def reconstruct_faces(
         )  # fmt: skip
         if anchors:  # no wearer's face is claimed from behind its head camera
             grp = _facing_gate(grp, g_anchor, a_who, V, slot_[rows_t], slot_of[t], R_, C_,
-                               o.anchor_facing)  # fmt: skip
+                               o.anchor_facing_deg)  # fmt: skip
         X, S, _rms, nviews = _core.face_triangulate(
             cams_t[0], cams_t[1], cams_t[2], local[slot_[rows_t]], lm_[rows_t], sigma[rows_t], grp
         )
