@@ -12,10 +12,13 @@ import pytest
 from socialcam import Cameras, _core
 from socialcam.faces import (
     FaceDetections,
+    FaceOptions,
     detect_faces,
     fuse_ego_exo,
     reconstruct_faces,
     refine_landmarks,
+    wearer_sightings,
+    wrong_pairs,
 )
 from socialcam.synth.cameras import look_at
 from socialcam.synth.raster import Renderer
@@ -670,6 +673,92 @@ def test_bad_input():
     lm = np.random.default_rng(0).uniform(90, 110, (2, 5, 2))
     with pytest.raises(ValueError, match="two detections"):
         _core.face_triangulate(K, R, C, np.array([0, 0]), lm, np.ones(2), np.array([0, 0]))
+
+
+def test_detections_are_checked_where_they_are_made():
+    """``FaceDetections`` from another detector: every field checked once, naming it."""
+    w = _World(5, V=3, P=2, T=4)
+    d = w.dets[0]
+    N = len(d)
+    ok = FaceDetections(d.frame.tolist(), d.box.tolist(), d.confidence.tolist(),
+                        d.landmarks.tolist(), 4, (1280.0, 960.0))  # fmt: skip
+    assert ok.frame.dtype == np.int64 and ok.size == (1280, 960) and len(ok) == N
+    bad = {
+        "frame: detection 0 is in frame 9": dict(frame=np.full(N, 9)),
+        "frame: detection 0 is in frame -1": dict(frame=np.full(N, -1)),
+        "frame: expected a 1-D array": dict(frame=d.frame.astype(float) + 0.5),
+        "box: expected shape": dict(box=d.box[:, :2]),
+        "box: detection 1": dict(box=np.where(np.arange(N)[:, None] == 1, np.nan, d.box)),
+        "confidence: expected shape": dict(confidence=np.ones(N + 1)),
+        "landmarks: expected shape": dict(landmarks=d.landmarks[:, :4]),
+        "landmark_noise: expected shape": dict(landmark_noise=np.ones(2 * N)),
+        r"size: expected \(width, height\)": dict(size=(1280, 960, 3)),
+        "size\\[1\\] \\(height\\)": dict(size=(1280, np.nan)),
+        "n_frames": dict(n_frames=-1),
+    }
+    for match, change in bad.items():
+        with pytest.raises(ValueError, match=match):
+            dataclasses.replace(d, **change)
+    # a NaN landmark is kept in the container (a detector may give one) but not reconstructed
+    lm = d.landmarks.copy()
+    lm[1, 2, 0] = np.nan
+    with pytest.raises(ValueError, match=r"detections\[0\]\.landmarks: detection 1"):
+        reconstruct_faces([dataclasses.replace(d, landmarks=lm), *w.dets[1:]], w.cams)
+    with pytest.raises(ValueError, match="cameras\\[1\\]: expected Cameras"):
+        reconstruct_faces(w.dets, [w.cams[0], None, w.cams[2]])
+    with pytest.raises(ValueError, match="detections: empty"):
+        reconstruct_faces([], [])
+    with pytest.raises(ValueError, match="min_noise > 0"):
+        reconstruct_faces(w.dets, w.cams, landmark_noise=0.0, min_noise=0.0)
+    with pytest.raises(ValueError, match="t: expected an integer"):
+        reconstruct_faces(w.dets, w.cams).rays(4)
+
+
+def test_frame_times_in_any_order_but_each_its_own():
+    """``Cameras.times`` may come in any order (as the frames were posed); a camera whose
+    frames share a time (times rounded to a coarser clock) is refused, naming it."""
+    w = _World(3, V=3, P=2, T=8)
+    ref = reconstruct_faces(w.dets, w.cams)
+    # camera 1's frames listed backwards: poses, times and detections' frames alike
+    c = w.cams[1]
+    rev = Cameras(c.K[::-1], c.R[::-1], c.C[::-1], c.times[::-1])
+    d = w.dets[1]
+    drev = dataclasses.replace(d, frame=7 - d.frame)
+    f3 = reconstruct_faces([w.dets[0], drev, w.dets[2]], [w.cams[0], rev, w.cams[2]])
+    np.testing.assert_allclose(f3.times, ref.times)
+    np.testing.assert_array_equal(f3.views, ref.views)
+    np.testing.assert_allclose(f3.landmarks, ref.landmarks, atol=1e-9)
+    # the camera with the most frames sets the instants: listed backwards, same instants
+    e, _f = wearer_sightings(w.dets, w.cams)
+    e2, _f2 = wearer_sightings([w.dets[0], drev, w.dets[2]], [w.cams[0], rev, w.cams[2]])
+    np.testing.assert_array_equal(e, e2)
+    coarse = Cameras(c.K, c.R, c.C, np.floor(np.arange(8) / 2) / 7.5)
+    for call in (reconstruct_faces, wearer_sightings):
+        with pytest.raises(ValueError, match="cameras\\[1\\]: two frames share the time"):
+            call(w.dets, [w.cams[0], coarse, w.cams[2]])
+
+
+def test_options_whose_ties_would_overflow_are_refused():
+    w = _World(5, V=3, P=2, T=4)
+    for name in ("turn_rate", "rigid_turn_rate", "rigid_turn_accel", "rigid_pivot_accel"):
+        with pytest.raises(ValueError, match=name):
+            FaceOptions(**{name: 1e-170})
+    with pytest.raises(ValueError, match="eye_in_head"):
+        FaceOptions(eye_in_head=1e200)
+    with pytest.raises(ValueError, match="smoothness: with instants"):
+        reconstruct_faces(w.dets, w.cams, smoothness=1e-170)
+    far = [Cameras(c.K, c.R, c.C, c.times * 1e300) for c in w.cams]
+    with pytest.raises(ValueError, match="smoothness: with instants"):
+        reconstruct_faces(w.dets, far)
+    e, f = wearer_sightings(w.dets, w.cams)
+    with pytest.raises(ValueError, match="expected: expected counts"):
+        wrong_pairs(e.astype(float), f)
+    with pytest.raises(ValueError, match="found: expected counts"):
+        wrong_pairs(e, -f - 1)
+    with pytest.raises(ValueError, match="ego_v: directions must be unit"):
+        fuse_ego_exo(2 * np.eye(3), 0.1, np.eye(3), 0.1)
+    with pytest.raises(ValueError, match="overflows"):
+        fuse_ego_exo(np.eye(3), 1e-200, np.eye(3), 0.1)
 
 
 def test_fuse_ego_exo_reports_disagreement():

@@ -78,6 +78,14 @@ LANDMARK_NOISE = {"mtcnn": 0.03, "facemesh": 0.01}
 # ``1 + ((angle − OBLIQUE) / OBLIQUE_WIDTH)²`` (45° and 10° chosen on 4 dev circles)
 OBLIQUE = {"facemesh": 45.0}
 OBLIQUE_WIDTH = 10.0
+#: smallest rate (rad/s, rad/s², m/s²) a temporal tie of ``FaceOptions`` takes: a million
+#: times below a head's; smaller rates make the ties' weights overflow
+MIN_RATE = 1e-6
+
+
+def _integral(x: object) -> bool:
+    """A float that holds a whole number (a frame size read from a file as 1280.0)."""
+    return isinstance(x, (float, np.floating)) and bool(np.isfinite(x)) and float(x).is_integer()
 
 
 # ----------------------------------------------------------------------------- detection
@@ -111,6 +119,60 @@ class FaceDetections:
     size: tuple[int, int]
     landmark_source: str = "mtcnn"
     landmark_noise: FloatArray | None = None
+
+    def __post_init__(self) -> None:
+        # Checked once here, so every function that takes detections (from our detector or
+        # from another one) can index them without its own checks. Lists are accepted.
+        n_frames = check_int(self.n_frames, "n_frames", min=0)
+        size = self.size
+        if not isinstance(size, (tuple, list, np.ndarray)) or len(size) != 2:
+            raise ValueError(f"size: expected (width, height) of the frames, got {size!r}")
+        w = check_int(int(size[0]) if _integral(size[0]) else size[0], "size[0] (width)", min=1)
+        h = check_int(int(size[1]) if _integral(size[1]) else size[1], "size[1] (height)", min=1)
+        frame = np.asarray(self.frame)
+        if frame.ndim != 1 or not (np.issubdtype(frame.dtype, np.integer) or frame.size == 0):
+            raise ValueError(f"frame: expected a 1-D array of frame indices, got {frame.dtype} "
+                             f"of shape {frame.shape}")  # fmt: skip
+        frame = frame.astype(np.int64, copy=False)
+        N = len(frame)
+        if N and (frame.min() < 0 or frame.max() >= n_frames):
+            bad = int(np.flatnonzero((frame < 0) | (frame >= n_frames))[0])
+            raise ValueError(
+                f"frame: detection {bad} is in frame {int(frame[bad])}, outside the "
+                f"{n_frames} frames searched (n_frames)"
+            )
+
+        def arr(value: object, name: str, shape: tuple[int, ...]) -> FloatArray:
+            try:
+                a = np.asarray(value, np.float64)
+            except (TypeError, ValueError) as e:
+                raise ValueError(f"{name}: expected numbers of shape {shape}: {e}") from None
+            if a.shape != shape:
+                raise ValueError(f"{name}: expected shape {shape} (one per detection), "
+                                 f"got {a.shape}")  # fmt: skip
+            return a
+
+        box = arr(self.box, "box", (N, 4))
+        bad_box = ~np.isfinite(box).all(axis=1) | (box[:, 2] <= 0) | (box[:, 3] <= 0)
+        if bad_box.any():
+            i = int(np.flatnonzero(bad_box)[0])
+            raise ValueError(
+                f"box: detection {i} (frame {int(frame[i])}) is {box[i].tolist()}: boxes must "
+                "be finite with width and height > 0"
+            )
+        confidence = arr(self.confidence, "confidence", (N,))
+        if not np.isfinite(confidence).all():
+            raise ValueError("confidence: expected finite scores")
+        landmarks = arr(self.landmarks, "landmarks", (N, 5, 2))
+        if not isinstance(self.landmark_source, str):
+            raise ValueError(f"landmark_source: expected a string, got {self.landmark_source!r}")
+        noise = self.landmark_noise
+        if noise is not None:
+            noise = arr(noise, "landmark_noise", (N,))
+        for name, value in (("frame", frame), ("box", box), ("confidence", confidence),
+                            ("landmarks", landmarks), ("landmark_noise", noise),
+                            ("n_frames", n_frames), ("size", (w, h))):  # fmt: skip
+            object.__setattr__(self, name, value)
 
     def __len__(self) -> int:
         return int(self.frame.shape[0])
@@ -683,22 +745,23 @@ class FaceOptions:
             "link_distance",
             "track_gate",
             "smoothness",
-            "eye_in_head",
         ):
             check_float(getattr(self, name), name, min=0.0)
+        # an angular spread (radians): beyond π it means nothing and overflows h
+        check_float(self.eye_in_head, "eye_in_head", min=0.0, max=np.pi)
         if self.landmark_noise is not None:
             check_float(self.landmark_noise, "landmark_noise", min=0.0)
         if self.turn_rate is not None:
-            check_float(self.turn_rate, "turn_rate", min=0.0, min_exclusive=True)
+            check_float(self.turn_rate, "turn_rate", min=MIN_RATE)
         check_float(
             self.anchor_facing_deg, "anchor_facing_deg", min=0.0, max=180.0, min_exclusive=True
         )
         if self.rigid_turn_rate is not None:
-            check_float(self.rigid_turn_rate, "rigid_turn_rate", min=0.0, min_exclusive=True)
+            check_float(self.rigid_turn_rate, "rigid_turn_rate", min=MIN_RATE)
         if self.rigid_turn_accel is not None:
-            check_float(self.rigid_turn_accel, "rigid_turn_accel", min=0.0, min_exclusive=True)
+            check_float(self.rigid_turn_accel, "rigid_turn_accel", min=MIN_RATE)
         if self.rigid_pivot_accel is not None:
-            check_float(self.rigid_pivot_accel, "rigid_pivot_accel", min=0.0, min_exclusive=True)
+            check_float(self.rigid_pivot_accel, "rigid_pivot_accel", min=MIN_RATE)
         if self.sync_tolerance is not None:
             check_float(self.sync_tolerance, "sync_tolerance", min=0.0, min_exclusive=True)
         check_int(self.max_gap, "max_gap", min=0)
@@ -766,6 +829,8 @@ class Faces3D:
         when no face was reconstructed then."""
         from socialcam.charges import GazeRays
 
+        T = len(self.times)
+        t = check_int(t, "t", min=-T, max=T - 1)
         ok = np.isfinite(self.v[t, :, 0])
         if not ok.any():
             return None
@@ -1285,25 +1350,112 @@ def _shape_covariance(
     return np.einsum("nai,ij,nbj->nab", AiB[:, :3], Ss, AiB[:, :3])
 
 
+def _check_views(detections: Sequence[FaceDetections], cameras: Sequence[Any]) -> int:
+    """Checks one ``FaceDetections`` per camera against its ``Cameras`` (frames, times, image
+    size); returns the number of cameras ``V``."""
+    from socialcam.camera import Cameras
+
+    if isinstance(detections, FaceDetections) or not isinstance(detections, Sequence):
+        raise ValueError("detections: expected a list of FaceDetections, one per camera")
+    if not isinstance(cameras, Sequence) or isinstance(cameras, Cameras):
+        raise ValueError("cameras: expected a list of Cameras, one per camera")
+    V = len(detections)
+    if V == 0:
+        raise ValueError("detections: empty, expected one FaceDetections per camera")
+    if len(cameras) != V:
+        raise ValueError(f"cameras: expected {V} Cameras (one per detections entry), "
+                         f"got {len(cameras)}")  # fmt: skip
+    for v, (d, c) in enumerate(zip(detections, cameras, strict=True)):
+        if not isinstance(d, FaceDetections):
+            raise ValueError(f"detections[{v}]: expected FaceDetections, got {type(d).__name__}")
+        if not isinstance(c, Cameras):
+            raise ValueError(f"cameras[{v}]: expected Cameras, got {type(c).__name__}")
+        if c.times is None:
+            raise ValueError(f"cameras[{v}]: needs times (the common clock) to match instants")
+        if d.n_frames != len(c):
+            raise ValueError(
+                f"detections[{v}]: {d.n_frames} frames searched but cameras[{v}] has {len(c)}"
+            )
+        w, hgt = d.size
+        pp = c.K[:, :2, 2]
+        if (
+            (pp[:, 0] < 0).any()
+            or (pp[:, 0] > w).any()
+            or (pp[:, 1] < 0).any()
+            or (pp[:, 1] > hgt).any()
+        ):
+            raise ValueError(
+                f"detections[{v}]: frames are {w}×{hgt} but cameras[{v}] has its principal point "
+                f"at {pp[0].round(1).tolist()}: K does not belong to these images"
+            )
+        bad = ~np.isfinite(d.landmarks).all(axis=(1, 2))
+        if bad.any():
+            i = int(np.flatnonzero(bad)[0])
+            raise ValueError(
+                f"detections[{v}].landmarks: detection {i} (frame {int(d.frame[i])}) is not finite"
+            )
+    return V
+
+
+def _camera_indices(value: object, name: str) -> list[int]:
+    """A list of camera indices: integers only (no float, bool or string)."""
+    if isinstance(value, (str, bytes)) or not isinstance(value, (Sequence, np.ndarray)):
+        raise ValueError(f"{name}: expected a list of camera indices, got {value!r}")
+    return [check_int(i, f"{name}[{k}]") for k, i in enumerate(value)]
+
+
 def _instants(cams: Sequence[Any], tol: float | None) -> tuple[FloatArray, list[IntArray]]:
-    """Common instants and, per camera, the frame at each instant (−1 = none)."""
+    """Common instants (the times of the camera with the most frames, in time order) and,
+    per camera, the frame at each instant (−1 = none). Frames may come in any order
+    (``Cameras.times``), but no two frames of one camera may share a time."""
+    for v, c in enumerate(cams):
+        t = np.sort(np.asarray(c.times, np.float64))
+        same = np.flatnonzero(np.diff(t) <= 0)
+        if len(same):
+            raise ValueError(
+                f"cameras[{v}]: two frames share the time {t[same[0]]:.6g} s (times): each "
+                "frame needs its own capture time"
+            )
     ref = max(range(len(cams)), key=lambda v: len(cams[v]))
-    times = np.asarray(cams[ref].times, np.float64)
+    times = np.sort(np.asarray(cams[ref].times, np.float64))
     if tol is None:
-        steps = [np.median(np.diff(c.times)) for c in cams if len(c) > 1]
+        steps = [_frame_step(c.times) for c in cams if len(c) > 1]
         tol = 0.5 * min(steps) if steps else 1e-3
     return times, [_nearest_frames(c.times, times, tol) for c in cams]
 
 
+def _tie_weight(step: float, name: str, dt: float) -> float:
+    """``1 / step²``, the weight of a temporal tie whose expected change per instant is
+    ``step``; a clear error where the option and the instants' spacing ``dt`` make it 0 or
+    infinite (a rate of 1e-170, times of 1e300 s)."""
+    with np.errstate(over="ignore", divide="ignore", invalid="ignore"):
+        w = 1.0 / np.float64(step) ** 2
+    if not (np.isfinite(w) and w > 0):
+        raise ValueError(
+            f"{name}: with instants {dt:.3g} s apart the temporal tie's weight is {float(w)}; "
+            "give a rate that is neither vanishing nor huge against that spacing"
+        )
+    return float(w)
+
+
+def _frame_step(frame_times: Any) -> float:
+    """Median spacing of a camera's frame times (any order), s; 1 for a single frame."""
+    t = np.sort(np.asarray(frame_times, np.float64))
+    return float(np.median(np.diff(t))) if len(t) > 1 else 1.0
+
+
 def _nearest_frames(frame_times: Any, times: FloatArray, tol: float) -> IntArray:
-    """Per time of ``times`` the index of the nearest of ``frame_times`` (sorted; the
+    """Per time of ``times`` the index of the nearest of ``frame_times`` (in any order; the
     earlier on a tie), −1 where it is further than ``tol``."""
-    ct = np.asarray(frame_times, np.float64)
+    order = np.argsort(np.asarray(frame_times, np.float64), kind="stable")
+    ct = np.asarray(frame_times, np.float64)[order]
+    if len(ct) == 0:
+        return np.full(len(times), -1, np.int64)
     idx = np.clip(np.searchsorted(ct, times), 1, max(1, len(ct) - 1))
     lo = np.clip(idx - 1, 0, len(ct) - 1)
     hi = np.clip(idx, 0, len(ct) - 1)
     best = np.where(np.abs(ct[lo] - times) <= np.abs(ct[hi] - times), lo, hi)
-    return np.where(np.abs(ct[best] - times) <= tol, best, -1).astype(np.int64)
+    return np.where(np.abs(ct[best] - times) <= tol, order[best], -1).astype(np.int64)
 
 
 def _every_group(
@@ -1444,32 +1596,7 @@ def reconstruct_faces(
     from socialcam.errors import DegenerateError
 
     o = apply_overrides(options, FaceOptions, overrides)
-    if isinstance(detections, FaceDetections) or not isinstance(detections, Sequence):
-        raise ValueError("detections: expected one FaceDetections per camera")
-    V = len(detections)
-    if V == 0 or len(cameras) != V:
-        raise ValueError(f"cameras: expected {V} Cameras (one per camera), got {len(cameras)}")
-    for v, (d, c) in enumerate(zip(detections, cameras, strict=True)):
-        if not isinstance(d, FaceDetections):
-            raise ValueError(f"detections[{v}]: expected FaceDetections, got {type(d).__name__}")
-        if c.times is None:
-            raise ValueError(f"cameras[{v}]: needs times (the common clock) to match instants")
-        if d.n_frames != len(c):
-            raise ValueError(
-                f"detections[{v}]: {d.n_frames} frames searched but cameras[{v}] has {len(c)}"
-            )
-        w, hgt = d.size
-        pp = c.K[:, :2, 2]
-        if (
-            (pp[:, 0] < 0).any()
-            or (pp[:, 0] > w).any()
-            or (pp[:, 1] < 0).any()
-            or (pp[:, 1] > hgt).any()
-        ):
-            raise ValueError(
-                f"detections[{v}]: frames are {w}×{hgt} but cameras[{v}] has its principal point "
-                f"at {pp[0].round(1).tolist()}: K does not belong to these images"
-            )
+    V = _check_views(detections, cameras)
     times, frames = _instants(cameras, o.sync_tolerance)
     T = len(times)
     # camera slots: one per (instant, camera) with a frame
@@ -1548,6 +1675,11 @@ def reconstruct_faces(
     lm_ = np.ascontiguousarray(np.array(lms, np.float64))
     size_ = np.array(size, np.float64)
     sigma = np.maximum(o.min_noise, np.array(frac, np.float64) * size_)
+    if not (sigma > 0).all():
+        raise ValueError(
+            "landmark_noise, min_noise: a landmark's noise is 0 (both options 0, or a detection's "
+            "landmark_noise 0): give min_noise > 0"
+        )
     oblique_ = np.array(obl, np.float64)
     src_ = np.array(srcs)
     slot_inst = inst_[slot_]
@@ -1665,11 +1797,11 @@ def reconstruct_faces(
     nv = np.zeros((T, J), np.int64)
     rig_sig = np.full((T, J), np.nan)
     dt = float(np.median(np.diff(times))) if T > 1 else 1.0
-    lam = 0.0 if o.smoothness <= 0 else 1.0 / (o.smoothness * dt) ** 2
+    lam = 0.0 if o.smoothness <= 0 else _tie_weight(o.smoothness * dt, "smoothness", dt)
     lam_s = (
         lam
         if o.turn_rate is None or o.smoothness <= 0
-        else 1.0 / (o.turn_rate * FACE_RADIUS * dt) ** 2
+        else _tie_weight(o.turn_rate * FACE_RADIUS * dt, "turn_rate", dt)
     )
     rigid_jobs: list[tuple[int, IntArray, IntArray, dict[str, Any]]] = []
     for pid in persons:
@@ -1808,17 +1940,10 @@ def wearer_sightings(
 
     Returns ``(expected, found)``, both ``(V, V)`` counts.
     """
-    if isinstance(detections, FaceDetections) or not isinstance(detections, Sequence):
-        raise ValueError("detections: expected one FaceDetections per camera")
-    V = len(detections)
-    if len(cameras) != V:
-        raise ValueError(f"cameras: expected {V} Cameras (one per camera), got {len(cameras)}")
+    V = _check_views(detections, cameras)
     for name, val in (("facing", facing), ("min_face", min_face), ("reach", reach),
                       ("face_width", face_width)):  # fmt: skip
         check_float(val, name, min=0.0, min_exclusive=True)
-    for v, c in enumerate(cameras):
-        if getattr(c, "times", None) is None:
-            raise ValueError(f"cameras[{v}]: needs times (the common clock) to match instants")
     _, frames = _instants(cameras, None)
     cos_f = np.cos(np.radians(facing))
     expected = np.zeros((V, V), np.int64)
@@ -1870,6 +1995,10 @@ def wrong_pairs(
         raise ValueError(
             f"expected, found: two (V, V) arrays of one shape, got {e.shape} and {f.shape}"
         )
+    for name, a in (("expected", e), ("found", f)):
+        if not np.issubdtype(a.dtype, np.integer) or (a < 0).any():
+            raise ValueError(f"{name}: expected counts (non-negative integers), got {a.dtype}")
+    check_int(min_expected, "min_expected", min=1)
     out = []
     for i in range(len(e)):
         for j in range(i + 1, len(e)):
@@ -1910,12 +2039,8 @@ def _check_groups(
     group: Sequence[int],
 ) -> tuple[list[int], list[int]]:
     """Checks a reference and a group of cameras (two disjoint non-empty sets of indices)."""
-    if isinstance(detections, FaceDetections) or not isinstance(detections, Sequence):
-        raise ValueError("detections: expected one FaceDetections per camera")
-    V = len(detections)
-    if len(cameras) != V:
-        raise ValueError(f"cameras: expected {V} Cameras (one per camera), got {len(cameras)}")
-    ref, group = [int(i) for i in ref], [int(i) for i in group]
+    V = _check_views(detections, cameras)
+    ref, group = _camera_indices(ref, "ref"), _camera_indices(group, "group")
     if not ref or not group or set(ref) & set(group) or not set(ref + group) <= set(range(V)):
         raise ValueError(
             f"ref, group: two disjoint non-empty sets of camera indices in 0..{V - 1}, "
@@ -2002,8 +2127,7 @@ def rejoin_by_head_turns(
             continue
         for j in group:
             c = cameras[j]
-            step = float(np.median(np.diff(c.times))) if len(c) > 1 else 1.0
-            idx = _nearest_frames(c.times, f3.times[seen], 0.5 * step)
+            idx = _nearest_frames(c.times, f3.times[seen], 0.5 * _frame_step(c.times))
             ok = idx >= 0
             if ok.sum() < min_instants:
                 continue
@@ -2128,8 +2252,7 @@ def _face_matches(
     first). Returns ``(camera, frame, points (5, 3), landmarks (5, 2), face size)``."""
     out: list[tuple[int, int, FloatArray, FloatArray, float]] = []
     for v, (c, d) in enumerate(zip(cams, dets, strict=True)):
-        step = float(np.median(np.diff(c.times))) if len(c) > 1 else 1.0
-        fr = _nearest_frames(c.times, times, 0.5 * step)
+        fr = _nearest_frames(c.times, times, 0.5 * _frame_step(c.times))
         sizes = np.sqrt(d.box[:, 2] * d.box[:, 3])
         for t in np.flatnonzero(fr >= 0):
             k = int(fr[t])
@@ -2548,21 +2671,13 @@ def scale_from_faces(
     io_ = check_float(interocular, "interocular", min=1e-3, max=1.0)
     check_int(min_instants, "min_instants", min=1)
     o = apply_overrides(options, FaceOptions, overrides)
-    if isinstance(detections, FaceDetections) or not isinstance(detections, Sequence):
-        raise ValueError("detections: expected one FaceDetections per camera")
-    if len(cameras) != len(detections):
-        raise ValueError(
-            f"cameras: expected {len(detections)} Cameras (one per camera), got {len(cameras)}"
-        )
+    _check_views(detections, cameras)
     if initial is not None:
         s0 = check_float(initial, "initial", min=1e-12, max=1e12)
         if s0 <= 0:
             raise ValueError(f"initial: must be > 0, got {initial}")
         guesses = [s0]
     else:
-        for v, c in enumerate(cameras):
-            if getattr(c, "times", None) is None:
-                raise ValueError(f"cameras[{v}]: needs times (the common clock) to match instants")
         s0 = _neighbour_guess(cameras, o.sync_tolerance)
         guesses = [s0, 0.5 * s0, 2.0 * s0]
 
@@ -2640,6 +2755,16 @@ def fuse_ego_exo(
     ha, hb = np.broadcast_to(ha, (len(a),)), np.broadcast_to(hb, (len(a),))
     if (ha <= 0).any() or (np.nan_to_num(hb, nan=1.0) <= 0).any():
         raise ValueError("ego_h, exo_h: bandwidths must be > 0")
+    for name, d, allow in (("ego_v", a, False), ("exo_v", b, True)):
+        n = np.linalg.norm(d, axis=1)
+        if (np.abs(n - 1.0) > 1e-6)[~np.isnan(n) if allow else slice(None)].any():
+            raise ValueError(f"{name}: directions must be unit vectors")
+    with np.errstate(over="ignore", divide="ignore"):
+        if (
+            not np.isfinite(1.0 / ha**2).all()
+            or not np.isfinite(1.0 / hb[~np.isnan(hb)] ** 2).all()
+        ):
+            raise ValueError("ego_h, exo_h: bandwidths so small that κ = 1 / h² overflows")
     with np.errstate(invalid="ignore", divide="ignore"):
         fused, kappa = fuse_gaze(a, 1.0 / ha**2, b, 1.0 / hb**2)
         dis = np.arccos(np.clip(np.einsum("ij,ij->i", a, b), -1.0, 1.0))
