@@ -81,6 +81,10 @@ def test_bqp_bad_input() -> None:
         sc.solve_bqp(np.eye(2), np.ones(3))
     with pytest.raises(ValueError, match="time_limit"):
         sc.solve_bqp(np.eye(2), time_limit=-1.0)
+    # finite entries whose sum overflows: an infinite objective is no answer
+    with pytest.raises(ValueError, match="overflows"):
+        sc.solve_bqp(np.zeros((6, 6)), np.full(6, -1e308))
+    assert sc.solve_bqp(np.zeros((6, 6)), np.full(6, -1e300)).objective == -6e300
 
 
 def _orbit(P: np.ndarray, aim: np.ndarray, rate: float = 60.0) -> tuple[sc.Cameras, np.ndarray]:

@@ -174,6 +174,13 @@ def solve_bqp(
     if Q_.shape[1] != n:
         raise ValueError(f"Q: must be square, got shape {Q_.shape}")
     c_ = None if c is None else as_float_array(c, "c", (n,))
+    with np.errstate(over="ignore"):  # |objective| ≤ Σ|Q| + Σ|c| over every x
+        largest = np.abs(Q_).sum() + (0.0 if c_ is None else np.abs(c_).sum())
+    if not np.isfinite(largest):
+        raise ValueError(
+            "Q, c: entries so large that the objective overflows float64 (Σ|Q| + Σ|c| is "
+            "infinite): scale the problem down"
+        )
     x, obj, bound, gap, nodes, optimal, root = _core.solve_bqp(Q_, c_, opts)
     return BqpResult(readonly(np.asarray(x, dtype=bool)), obj, bound, gap, nodes, optimal, root)
 
