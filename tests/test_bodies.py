@@ -268,3 +268,51 @@ def test_plot_body_shows_each_joints_error(clips):
         plot_body(pc.cameras, body.points, [(0, 13)])
     with pytest.raises(ValueError, match="points"):
         plot_body(pc.cameras, body.points[:-1], BODY_BONES)
+
+
+def test_bad_pairs_name_pairs(clips):
+    """``pairs`` are two different integer joint indices each: a float, a bool or a pair of
+    the wrong length is a ValueError naming ``pairs`` (not an IndexError or an unpacking
+    error); numpy integers and an integer array are pairs."""
+    m = clips["131_01_walk"]
+    pc = photo_collection(m.positions, m.names, m.fps, n_photos=12, seed=4)
+    dets, cams = list(pc.detections), pc.cameras
+    for bad in ([(0.5, 1)], [(1, 2.0)], [(True, 2)], [(1, 2, 3)], [(1,)], [1, 2], "12", 3,
+                [(1, 1)], [(-1, 2)]):  # fmt: skip
+        with pytest.raises(ValueError, match="pairs: "):
+            reconstruct_body(dets, cams, bad)
+    want = reconstruct_body(dets, cams, BODY_PAIRS).points
+    as_numpy = [(np.int64(a), np.int32(b)) for a, b in BODY_PAIRS]
+    np.testing.assert_array_equal(reconstruct_body(dets, cams, as_numpy).points, want)
+    np.testing.assert_array_equal(reconstruct_body(dets, cams, np.array(BODY_PAIRS)).points, want)
+
+
+def test_person_lost_in_every_photo(clips):
+    """A centre trajectory within ``gate`` of no detection at all is a clear ValueError (it
+    was a numpy broadcasting error in the next round)."""
+    m = clips["131_01_walk"]
+    pc = photo_collection(m.positions, m.names, m.fps, n_photos=12, seed=4)
+    with pytest.raises(ValueError, match="detections: the person is lost in every photo"):
+        reconstruct_body(pc.detections, pc.cameras, BODY_PAIRS, gate=1e-6)
+
+
+def test_more_folds_than_photos_are_one_photo_each(clips, monkeypatch):
+    """``folds`` above the number of photos is as many folds as photos: the same skeleton,
+    without a trajectory fit per empty fold (``folds=10**9`` never returned)."""
+    from socialcam import trajectory
+
+    m = clips["131_01_walk"]
+    pc = photo_collection(m.positions, m.names, m.fps, n_photos=12, seed=4)
+    F = len(pc.cameras)
+    want = reconstruct_body(pc.detections, pc.cameras, BODY_PAIRS, folds=F)
+    fit, calls = trajectory.reconstruct_trajectories, []
+
+    def counted(*args, **kw):
+        calls.append(1)
+        assert len(calls) <= 5 * (F + 1) + 2 * 13, "a fit per empty fold"
+        return fit(*args, **kw)
+
+    monkeypatch.setattr(trajectory, "reconstruct_trajectories", counted)
+    got = reconstruct_body(pc.detections, pc.cameras, BODY_PAIRS, folds=10**9)
+    np.testing.assert_array_equal(got.points, want.points)
+    np.testing.assert_array_equal(got.swapped, want.swapped)

@@ -392,3 +392,48 @@ def test_real_structure_from_motion_on_real_photos(tmp_path, data_dir, clips):
     s, R, t = align_similarity(res.body.points[0], person)
     shape = np.linalg.norm(s * res.body.points[0] @ R.T + t - person, axis=1)
     assert np.median(shape) < 0.03 * np.ptp(person[:, 2]), (np.median(shape), np.ptp(person[:, 2]))
+
+
+def _exif_photo(path, offset=None):
+    """A small JPEG taken at 2024-05-01 10:00:00 (EXIF), with ``OffsetTimeOriginal``."""
+    ex = Image.Exif()
+    ifd = ex.get_ifd(0x8769)
+    ifd[0x9003] = "2024:05:01 10:00:00"  # DateTimeOriginal
+    if offset is not None:
+        ifd[0x9011] = offset  # OffsetTimeOriginal
+    Image.new("RGB", (16, 12)).save(path, exif=ex.tobytes())
+    return path
+
+
+def test_photo_times_bad_exif_offset(tmp_path):
+    """``OffsetTimeOriginal`` is ``±HH:MM``; blank (spaces, and the colon, as EXIF writes an
+    unknown offset) is read as absent; anything else is a ValueError naming the file, the
+    tag and the value (it was a bare unpacking, int() or datetime error)."""
+    ref = _exif_photo(tmp_path / "ref.jpg")
+    east = _exif_photo(tmp_path / "east.jpg", "+02:30")
+    np.testing.assert_allclose(bodies.photo_times([ref, east]), [9000.0, 0.0])
+    for k, blank in enumerate(["      ", "   :  ", ""]):
+        p = _exif_photo(tmp_path / f"blank{k}.jpg", blank)
+        np.testing.assert_allclose(bodies.photo_times([ref, p]), [0.0, 0.0])
+    for k, bad in enumerate(["+5", "Z", "+ab:cd", "+99:00", "+05:60", "05:00", "+05:00x"]):
+        p = _exif_photo(tmp_path / f"bad{k}.jpg", bad)
+        with pytest.raises(ValueError, match=rf"bad{k}\.jpg' has an unreadable OffsetTimeOriginal"):
+            bodies.photo_times([ref, p])
+
+
+def test_photo_times_bad_arguments(tmp_path):
+    """``times`` that is not a sequence and photos that are not paths are ValueErrors naming
+    the argument (not a TypeError from len() or an AttributeError from PIL)."""
+    ref = _exif_photo(tmp_path / "ref.jpg")
+    for bad in (1.0, "1.0", np.float64(1.0)):
+        with pytest.raises(ValueError, match="times: expected a sequence"):
+            bodies.photo_times([ref], times=bad)
+    np.testing.assert_allclose(bodies.photo_times([ref, ref], times=np.array([1.0, 2.5])),
+                               [0.0, 1.5])  # fmt: skip
+    for photos in ([None], [ref, 3], [b"ref.jpg"]):
+        with pytest.raises(ValueError, match=r"photos: photo \d is not a path"):
+            bodies.photo_times(photos)
+        with pytest.raises(ValueError, match=r"photos: photo \d is not a path"):
+            bodies.photo_times(photos, times=[0.0] * len(photos))
+    with pytest.raises(ValueError, match=r"photos: photo 0 is not a path"):
+        reconstruct_body_from_photos([None], times=[0.0])

@@ -20,6 +20,7 @@ from __future__ import annotations
 import datetime as _dt
 import math
 import os
+import re
 from collections.abc import Sequence
 from dataclasses import dataclass, replace
 from typing import Any
@@ -53,8 +54,24 @@ def _with_image(path: str | os.PathLike[str], read: Any) -> Any:
         raise ValueError(f"photos: cannot read {os.fspath(path)!r} ({exc})") from None
 
 
+def _check_paths(photos: object) -> list[str | os.PathLike[str]]:
+    """``photos`` as a list of paths (str or ``os.PathLike``); anything else is a ValueError
+    naming it."""
+    if isinstance(photos, (str, os.PathLike)) or not isinstance(photos, Sequence):
+        raise ValueError("photos: expected a sequence of image paths")
+    for i, p in enumerate(photos):
+        if not isinstance(p, (str, os.PathLike)):
+            raise ValueError(f"photos: photo {i} is not a path (got {type(p).__name__})")
+    return list(photos)
+
+
 def _exif_time(path: str | os.PathLike[str]) -> float | None:
-    """Capture time of one photo (POSIX seconds) from EXIF, ``None`` when it has none."""
+    """Capture time of one photo (POSIX seconds) from EXIF, ``None`` when it has none.
+
+    ``OffsetTimeOriginal`` is ``+HH:MM`` or ``-HH:MM`` from UTC; without it, or blank (the
+    spaces, and colon, that EXIF writes when the offset is unknown), the time is read as
+    UTC. Any other offset is a ValueError naming the file.
+    """
     ifd = _with_image(path, lambda im: im.getexif().get_ifd(_EXIF_IFD))
     stamp = ifd.get(_DATETIME)
     if not stamp:
@@ -65,12 +82,17 @@ def _exif_time(path: str | os.PathLike[str]) -> float | None:
         raise ValueError(
             f"photos: {os.fspath(path)!r} has an unreadable DateTimeOriginal {stamp!r}"
         ) from None
-    off = ifd.get(_OFFSET)
+    off = str(ifd.get(_OFFSET, "") or "").strip("\x00 ")
     tz = _dt.timezone.utc
-    if off:
-        sign = -1 if str(off).startswith("-") else 1
-        hh, mm = str(off).lstrip("+-").split(":")[:2]
-        tz = _dt.timezone(sign * _dt.timedelta(hours=int(hh), minutes=int(mm)))
+    if off.strip(":"):  # blank: unknown, as if absent
+        hit = re.fullmatch(r"([+-])([01][0-9]|2[0-3]):([0-5][0-9])", off)
+        if hit is None:
+            raise ValueError(
+                f"photos: {os.fspath(path)!r} has an unreadable OffsetTimeOriginal {off!r} "
+                "(expected +HH:MM or -HH:MM)"
+            )
+        sign = -1 if hit[1] == "-" else 1
+        tz = _dt.timezone(sign * _dt.timedelta(hours=int(hit[2]), minutes=int(hit[3])))
     sub = str(ifd.get(_SUBSEC, "") or "").strip("\x00 ")
     frac = float(f"0.{sub}") if sub.isdigit() else 0.0
     return t.replace(tzinfo=tz).timestamp() + frac
@@ -94,15 +116,22 @@ def photo_times(
     ------
     ValueError
         A photo without EXIF ``DateTimeOriginal`` and no given time (the message names the
-        file), a file that cannot be read, mixed given and EXIF times, a wrong count.
+        file), an unreadable ``DateTimeOriginal`` or ``OffsetTimeOriginal``, a file that
+        cannot be read, a path that is not a string or path, mixed given and EXIF times,
+        ``times`` that is not a sequence, a wrong count.
     """
-    if isinstance(photos, (str, os.PathLike)) or not isinstance(photos, Sequence):
-        raise ValueError("photos: expected a sequence of image paths")
+    photos = _check_paths(photos)
     n = len(photos)
     if n == 0:
         raise ValueError("photos: no photo given")
     given = np.full(n, np.nan)
     if times is not None:
+        if isinstance(times, (str, bytes)) or not (
+            isinstance(times, Sequence) or (isinstance(times, np.ndarray) and times.ndim == 1)
+        ):
+            raise ValueError(
+                f"times: expected a sequence of times (s), one per photo, got {type(times).__name__}"
+            )
         if len(times) != n:
             raise ValueError(f"times: expected {n} times (one per photo), got {len(times)}")
         given = as_float_array([np.nan if t is None else t for t in times], "times", (n,),
@@ -139,8 +168,9 @@ class BodyOptions:
     rounds : rounds of association and of swap repair (each refits the trajectories)
     repair_swaps : find and undo left/right swaps (False: take the labels as given)
     folds : swap repair judges each photo by trajectories fitted without it, in this many
-        folds of the photos; a pair is exchanged when its error swapped drops below
-        ``pair_ratio`` × the unswapped one
+        folds of the photos (at most one per photo: a larger number means one photo per
+        fold); a pair is exchanged when its error swapped drops below ``pair_ratio`` × the
+        unswapped one
     k_max : largest DCT basis size per joint tried by cross validation (Eq 5.8); ``None``
         (default): 8 per second of the photos' time span, at least 24 and at most 128. A
         fixed 24 (12 until session 32) caps longer collections: FAIR's 11.3 s dab with 270
@@ -200,6 +230,28 @@ class Body:
     weight: FloatArray
 
 
+def _check_pairs(pairs: object, J: int) -> list[tuple[int, int]]:
+    """``pairs`` as a list of ``(a, b)``: two different joint indices in ``0..J-1`` each
+    (Python or numpy integers; no float, no bool)."""
+    if isinstance(pairs, np.ndarray):
+        pairs = pairs.tolist()
+    if isinstance(pairs, (str, bytes)) or not isinstance(pairs, Sequence):
+        raise ValueError(f"pairs: expected a sequence of joint index pairs, got {pairs!r}")
+    out = []
+    for p in pairs:
+        if isinstance(p, np.ndarray):
+            p = p.tolist()
+        if isinstance(p, (str, bytes)) or not isinstance(p, Sequence) or len(p) != 2:
+            raise ValueError(f"pairs: {p!r} is not a pair of two joint indices")
+        a, b = p
+        if any(isinstance(j, bool) or not isinstance(j, (int, np.integer)) for j in (a, b)):
+            raise ValueError(f"pairs: ({a!r}, {b!r}) is not a pair of integer joint indices")
+        if not (0 <= a < J and 0 <= b < J and a != b):
+            raise ValueError(f"pairs: ({a}, {b}) is not a pair of joints in 0..{J - 1}")
+        out.append((int(a), int(b)))
+    return out
+
+
 def _centre(uv: FloatArray, pairs: Sequence[tuple[int, int]]) -> FloatArray:
     """Swap-invariant centres ``(n, 2)`` of detections ``uv (n, J, 2)``."""
     paired = {j for p in pairs for j in p}
@@ -255,12 +307,14 @@ def reconstruct_body(
         model found (NaN = joint missed), any order; ``(0, J, 2)`` for none
     cameras : ``F`` :class:`socialcam.Cameras` with capture ``times`` (e.g. from
         ``sfm.reconstruct_static`` and :func:`photo_times`)
-    pairs : left/right joint index pairs (swapped by pose models)
+    pairs : left/right joint index pairs (swapped by pose models): two different integer
+        joint indices each
 
     Raises
     ------
     ValueError
-        Shapes that do not match, no ``times``, fewer than 3 photos with a single person.
+        Shapes that do not match, no ``times``, bad ``pairs``, fewer than 3 photos with a
+        single person, the person lost in every photo.
     """
     from socialcam._validate import apply_overrides
     from socialcam.camera import Cameras
@@ -284,9 +338,7 @@ def reconstruct_body(
     J = next((d.shape[1] for d in dets if len(d)), 0)
     if J == 0 or any(len(d) and d.shape[1] != J for d in dets):
         raise ValueError("detections: every detection needs the same number of joints (≥ 1)")
-    for a, b in pairs:
-        if not (0 <= a < J and 0 <= b < J and a != b):
-            raise ValueError(f"pairs: ({a}, {b}) is not a pair of joints in 0..{J - 1}")
+    pairs = _check_pairs(pairs, J)
     span = float(np.ptp(cameras.times)) if F else 0.0
     k_max = o.k_max if o.k_max is not None else min(128, max(24, math.ceil(8.0 * span)))
     topts = TrajectoryOptions(k_max=k_max)
@@ -316,6 +368,11 @@ def reconstruct_body(
             e = np.where(np.isfinite(e), e, np.inf)
             if e.min() <= o.gate:
                 new[f] = int(np.argmin(e))
+        if not (new >= 0).any():
+            raise ValueError(
+                "detections: the person is lost in every photo (no detection within gate × "
+                "its size of the person's centre trajectory)"
+            )
         if (new == chosen).all():
             break
         chosen = new
@@ -323,13 +380,14 @@ def reconstruct_body(
     for i in np.nonzero(chosen >= 0)[0]:
         x[:, i] = dets[i][chosen[i]]
     swapped = np.zeros((F, len(pairs)), bool)
-    folds = np.arange(F) % o.folds
+    n_folds = min(o.folds, F)  # more folds than photos would be empty
+    folds = np.arange(F) % n_folds
     np.random.default_rng(0).shuffle(folds)
     for _ in range(o.rounds if o.repair_swaps else 0):
         # each photo judged by trajectories fitted without it (held out), so that its own
         # (possibly swapped) joints cannot pull the fit towards themselves
         uv = np.full((J, F, 2), np.nan)
-        for q in range(o.folds):
+        for q in range(n_folds):
             xq = x.copy()
             xq[:, folds == q] = np.nan
             pts = reconstruct_trajectories(xq, cameras, options=topts).points
@@ -674,9 +732,7 @@ def reconstruct_body_from_photos(
     from socialcam.synth.photos import BODY_JOINTS, BODY_PAIRS
 
     o = apply_overrides(options, BodyOptions, overrides)
-    if isinstance(photos, (str, os.PathLike)) or not isinstance(photos, Sequence):
-        raise ValueError("photos: expected a sequence of image paths")
-    paths = [os.fspath(p) for p in photos]
+    paths = [os.fspath(p) for p in _check_paths(photos)]
     for p in paths:
         if not os.path.isfile(p):
             raise ValueError(f"photos: {p!r} is not a file")
