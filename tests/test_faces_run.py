@@ -9,6 +9,7 @@ import csv
 import dataclasses
 import json
 import shutil
+from pathlib import Path
 
 import numpy as np
 import pytest
@@ -116,6 +117,16 @@ def test_detections_are_kept_and_read_again(tmp_path, scene, found, cache, monke
     (kept / f"{tr.names[0]}.npz").write_bytes(b"not an npz")
     with pytest.raises(Detected):
         faces_in_videos(scene.videos, cams, progress=False, cache_dir=kept)
+    whole = (cache / f"{tr.names[0]}.npz").read_bytes()
+    (kept / f"{tr.names[0]}.npz").write_bytes(whole[: len(whole) // 2])  # cut short
+    with pytest.raises(Detected):
+        faces_in_videos(scene.videos, cams, progress=False, cache_dir=kept)
+    with np.load(cache / f"{tr.names[0]}.npz") as z:  # the right key, arrays that disagree
+        parts = {k: z[k] for k in z.files}
+    parts["box"] = parts["box"][:-1]
+    np.savez(kept / f"{tr.names[0]}.npz", **parts)
+    with pytest.raises(Detected):
+        faces_in_videos(scene.videos, cams, progress=False, cache_dir=kept)
     shutil.copy(cache / f"{tr.names[0]}.npz", kept)
     st = os.stat(scene.videos[1])
     os.utime(scene.videos[1], ns=(st.st_atime_ns, st.st_mtime_ns + 10**9))
@@ -126,6 +137,10 @@ def test_detections_are_kept_and_read_again(tmp_path, scene, found, cache, monke
         os.utime(scene.videos[1], ns=(st.st_atime_ns, st.st_mtime_ns))
     with pytest.raises(ValueError, match="cache_dir"):
         faces_in_videos(scene.videos, cams, progress=False, cache_dir=3)
+    with pytest.raises(ValueError, match=r"cache_dir: .* is a file"):
+        faces_in_videos(scene.videos, cams, progress=False, cache_dir=scene.videos[0])
+    with pytest.raises(ValueError, match=r"videos: .* is not a file"):
+        faces_in_videos([*scene.videos[:-1], tmp_path / "gone.mp4"], cams, progress=False)
 
 
 def _run_folder(tmp_path, scene, scale=1.0, unit=1.0, cache=None):
@@ -281,6 +296,60 @@ def test_a_run_without_metric_scale_is_scaled_by_the_faces(tmp_path, scene, foun
         p = np.array([float(r[k]) for k in ("px", "py", "pz")])
         err.append(np.linalg.norm(p - f3.p[i, j] * ratio))
     assert len(err) >= 0.8 * len(rows) and np.median(err) < 0.005, (len(err), np.median(err))
+
+
+def test_a_damaged_run_folder_is_an_error_not_a_traceback(tmp_path, scene, cache, capsys):
+    """``socialcam faces RUN_DIR`` on a run folder whose files were cut short, edited or
+    replaced: a one-line error naming the file (exit 2), from the Python API a ValueError."""
+
+    def damaged(name: str, change) -> Path:
+        run = _run_folder(tmp_path / name, scene, cache=cache)
+        change(run)
+        return run
+
+    sfm = Path("cache") / "sfm"
+    cases = {
+        "npz cut short": (
+            lambda r: (r / sfm / "reconstruction.npz").write_bytes(
+                (r / sfm / "reconstruction.npz").read_bytes()[:300]
+            ),
+            "reconstruction.npz",
+        ),
+        "json not a record": (
+            lambda r: (r / sfm / "reconstruction.json").write_text("[]"),
+            "reconstruction.json is damaged",
+        ),
+        "a name the npz lacks": (
+            lambda r: (r / sfm / "reconstruction.json").write_text(
+                json.dumps(
+                    {**json.loads((r / sfm / "reconstruction.json").read_text()), "names": ["x"]}
+                )
+            ),
+            "does not match",
+        ),
+        "report not a record": (lambda r: (r / "report.json").write_text("[]"), "lists no videos"),
+        "report cut short": (
+            lambda r: (r / "report.json").write_text('{"inputs": '),
+            "report.json is damaged",
+        ),
+        "videos not paths": (
+            lambda r: (r / "report.json").write_text('{"inputs": {"videos": [1, 2]}}'),
+            "not paths",
+        ),
+    }
+    for name, (change, match) in cases.items():
+        run = damaged(name.replace(" ", "_"), change)
+        with pytest.raises(ValueError, match=match):
+            faces(run)
+        capsys.readouterr()
+        assert main(["faces", str(run), "--no-plots"]) == 2, name
+        err = capsys.readouterr().err
+        assert err.startswith("socialcam faces: error:") and "Traceback" not in err, err
+    # a file where the run keeps a folder: the operating system's own error, on one line
+    run = damaged("csv_folder", lambda r: (r / "faces.csv").mkdir())
+    capsys.readouterr()
+    assert main(["faces", str(run), "--no-plots"]) == 2
+    assert "faces.csv" in capsys.readouterr().err
 
 
 def test_poses_without_metric_scale_take_it_from_the_faces(tmp_path, scene, monkeypatch):

@@ -386,7 +386,7 @@ def _poses(parser: argparse.ArgumentParser, args: argparse.Namespace) -> int:
                 seed="seed",
             ),  # type: ignore[arg-type]
         )
-    except ValueError as exc:
+    except (ValueError, OSError) as exc:  # OSError: a path that is a file, not a folder, ...
         print(f"socialcam poses: error: {exc}", file=sys.stderr)
         return 2
     report = json.loads((Path(args.out) / "report.json").read_text())
@@ -445,7 +445,7 @@ def _faces(
             progress=sys.stderr.isatty(),
             interocular=interocular,
         )
-    except ValueError as exc:
+    except (ValueError, OSError) as exc:  # OSError: a path that is a file, not a folder, ...
         print(f"socialcam faces: error: {exc}", file=sys.stderr)
         return 2
     if as_json:
@@ -553,7 +553,7 @@ def _bodies(args: argparse.Namespace) -> int:
             progress=sys.stderr.isatty(),
         )
         write_body(res, args.out, plots=not args.no_plots)
-    except (ValueError, RuntimeError) as exc:
+    except (ValueError, RuntimeError, OSError) as exc:
         return fail(str(exc))
     report = json.loads((Path(args.out) / "report.json").read_text())
     if args.json:
@@ -649,7 +649,7 @@ def _run(parser: argparse.ArgumentParser, args: argparse.Namespace) -> int:
                 progress=sys.stderr.isatty(),
                 **options,  # type: ignore[arg-type]
             )
-    except ValueError as exc:
+    except (ValueError, OSError) as exc:  # OSError: a path that is a file, not a folder, ...
         print(f"socialcam run: error: {exc}", file=sys.stderr)
         return 2
     rep = res.report
@@ -688,7 +688,7 @@ def _view(run_dir: str, out: str | None, *, frames: bool) -> int:
 
     try:
         path = write_rrd(run_dir, out, frames=frames)
-    except ValueError as exc:
+    except (ValueError, OSError) as exc:  # OSError: a path that is a file, not a folder, ...
         print(f"socialcam view: error: {exc}", file=sys.stderr)
         return 2
     print(f"rerun recording written to {path} (open it with: rerun {path})")

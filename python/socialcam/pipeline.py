@@ -13,6 +13,7 @@ import json
 import os
 import time
 import warnings
+import zipfile
 from collections.abc import Collection, Mapping, Sequence
 from concurrent.futures import ThreadPoolExecutor
 from dataclasses import asdict, dataclass, fields, replace
@@ -363,8 +364,10 @@ def load_poses(run_dir: str | os.PathLike[str]) -> VideoReconstruction:
     cache = Path(run_dir) / "cache" / "sfm"
     try:
         rec = VideoReconstruction.load(cache)
-    except ValueError:
-        raise ValueError(f"run_dir: {run_dir} holds no poses of socialcam poses or run") from None
+    except ValueError as exc:
+        raise ValueError(
+            f"run_dir: {run_dir} holds no poses of socialcam poses or run ({exc})"
+        ) from None
     path = cache / FACE_SCALE_FILE
     key_file = cache / "key.txt"
     if path.is_file() and key_file.is_file():
@@ -2280,12 +2283,17 @@ def _cached_detections(
     kept: dict[str, Any] | None = None
     if path is not None and path.is_file():
         try:
-            with np.load(path, allow_pickle=False) as z:
+            # the file opened here, so that it is closed when np.load fails on a cut-short zip
+            with open(path, "rb") as fh, np.load(fh, allow_pickle=False) as z:
                 if str(z["key"]) == key:
                     kept = {k: z[k] for k in (*_DETECTION_FIELDS, "searched")}
                     kept["size"] = (int(z["size"][0]), int(z["size"][1]))
                     kept["source"] = str(z["source"])
-        except (OSError, ValueError, KeyError):
+                    n = len(kept["time"])
+                    lengths = {len(kept[f]) for f in _DETECTION_FIELDS}
+                    if lengths != {n} or kept["box"].shape[1:] != (4,):
+                        kept = None  # arrays that do not belong together: as unreadable
+        except (OSError, ValueError, KeyError, EOFError, zipfile.BadZipFile):
             kept = None  # unreadable: searched again and rewritten
     if kept is None:
         kept = {
@@ -2400,6 +2408,15 @@ def faces_in_videos(
         )
     if interocular is not None:
         check_float(interocular, "interocular", min=1e-3, max=1.0)
+    for p in videos:
+        if not isinstance(p, (str, os.PathLike)):
+            raise ValueError(f"videos: {p!r} is not a path")
+        if not os.path.isfile(p):
+            raise ValueError(f"videos: {os.fspath(p)!r} is not a file")
+    if not isinstance(cameras, Mapping):
+        raise ValueError("cameras: expected a mapping of wearer name to Cameras")
+    if cache_dir is not None and os.path.exists(cache_dir) and not os.path.isdir(cache_dir):
+        raise ValueError(f"cache_dir: {os.fspath(cache_dir)!r} is a file, not a folder")
     names = [Path(p).stem for p in videos]
     use = [i for i, n in enumerate(names) if n in cameras and len(cameras[n]) > 0]
     if len(use) < 2:
@@ -2728,8 +2745,16 @@ def faces(
     report_p = out / "report.json"
     if not report_p.is_file() or not (out / "cache" / "sfm").is_dir():
         raise ValueError(f"run_dir: {out} holds no run of socialcam run")
-    run_report = json.loads(report_p.read_text())
-    videos = run_report.get("inputs", {}).get("videos")
+    try:
+        run_report = json.loads(report_p.read_text())
+    except ValueError as exc:
+        raise ValueError(f"run_dir: {report_p} is damaged ({exc})") from None
+    inputs = run_report.get("inputs") if isinstance(run_report, dict) else None
+    videos = inputs.get("videos") if isinstance(inputs, dict) else None
+    if videos is not None and (
+        not isinstance(videos, list) or not all(isinstance(v, str) for v in videos)
+    ):
+        raise ValueError(f"run_dir: {report_p} lists videos that are not paths: {videos!r}")
     if not videos:
         raise ValueError(f"run_dir: {report_p} lists no videos (not a finished run)")
     missing = [v for v in videos if not os.path.exists(v)]

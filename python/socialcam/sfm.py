@@ -14,6 +14,7 @@ import shutil
 import sys
 import time
 import warnings
+import zipfile
 from collections.abc import Callable, Iterator, Mapping, Sequence
 from concurrent.futures import ThreadPoolExecutor
 from dataclasses import dataclass, fields, replace
@@ -435,15 +436,31 @@ class VideoReconstruction:
         meta_p, npz_p = out / "reconstruction.json", out / "reconstruction.npz"
         if not meta_p.is_file() or not npz_p.is_file():
             raise ValueError(f"out_dir: {out} holds no saved video reconstruction")
-        meta = json.loads(meta_p.read_text())
+        try:
+            meta = json.loads(meta_p.read_text())
+            if not isinstance(meta, dict) or not isinstance(meta.get("names"), list):
+                raise ValueError("no list of names")
+        except ValueError as exc:  # json's errors are ValueErrors too
+            raise ValueError(f"out_dir: {meta_p} is damaged ({exc})") from None
         lenses: dict[str, Any] = {}
         if (out / "model").is_dir():
             rec = pycolmap.Reconstruction(str(out / "model"))
             for img in rec.images.values():
                 lenses.setdefault(img.name.split("/")[0], rec.cameras[img.camera_id])
+        try:
+            return cls._from_saved(meta, npz_p, lenses, out)
+        except (OSError, EOFError, KeyError, TypeError, zipfile.BadZipFile) as exc:
+            raise ValueError(f"out_dir: {npz_p} does not match {meta_p} or is damaged "
+                             f"({type(exc).__name__}: {exc})") from None  # fmt: skip
+
+    @classmethod
+    def _from_saved(
+        cls, meta: dict[str, Any], npz_p: Path, lenses: dict[str, Any], out: Path
+    ) -> VideoReconstruction:
+        """The reconstruction from its saved arrays and metadata (:meth:`load`)."""
         cameras: dict[str, Cameras] = {}
         quality: dict[str, FrameQuality] = {}
-        with np.load(npz_p) as z:
+        with open(npz_p, "rb") as fh, np.load(fh) as z:  # fh closed when np.load fails
             names = tuple(meta["names"])
             for i, name in enumerate(names):
                 q = {k: z[f"{i}_{k}"] for k in ("times", "posed", "keyframe", "rms", "n_inliers")}
