@@ -139,6 +139,12 @@ def test_pose_model_on_a_real_photograph():
         detect_body_joints([np.zeros((8, 8), np.uint8)])
     with pytest.raises(ValueError, match="images: photo 1 is empty"):
         detect_body_joints([img, np.zeros((0, 5, 3), np.uint8)])
+    with pytest.raises(ValueError, match=r"images: .* got one path"):  # not its characters
+        detect_body_joints(str(DATA / "nothing.jpg"))
+    with pytest.raises(ValueError, match=r"images: .* got NoneType"):
+        detect_body_joints(None)
+    with pytest.raises(ValueError, match="progress"):
+        detect_body_joints([img], progress="x")
 
 
 def test_fast_motion_of_another_person():

@@ -253,6 +253,10 @@ def test_facemesh_landmarks_scatter_less_than_mtcnn():
             kept = refine_landmarks(blank, one)
             np.testing.assert_array_equal(kept.landmarks, one.landmarks)
             np.testing.assert_array_equal(kept.landmark_noise, 0.03)
+            with pytest.raises(ValueError, match="frame 0 is 320×240"):  # not where found
+                refine_landmarks(np.full((1, 240, 320, 3), 128, np.uint8), one)
+            with pytest.raises(ValueError, match="detections: expected FaceDetections"):
+                refine_landmarks(blank, None)
         scatter = []
         for det in (d, refined):
             assert (det.frame == np.arange(len(frames))).all()
@@ -663,6 +667,8 @@ def test_bad_input():
     with pytest.raises(ValueError, match="frames"):
         detect_faces(np.zeros((4, 4), np.uint8))
     assert len(detect_faces(np.zeros((64, 64, 3), np.uint8))) == 0
+    with pytest.raises(ValueError, match="H, W ≥ 1"):
+        detect_faces(np.zeros((0, 64, 3), np.uint8))
     with pytest.raises(ValueError, match="turned"):
         detect_faces(np.zeros((64, 64, 3), np.uint8), turned=0.5)
     # the core refuses two detections of one camera in one group

@@ -540,9 +540,17 @@ def detect_body_joints(
 
     vis = check_float(min_visibility, "min_visibility", min=0.0, max=1.0)
     mc = check_int(model_complexity, "model_complexity", min=0, max=1)
+    check_bool(progress, "progress")
+    if isinstance(images, (str, bytes, os.PathLike)):  # one path: not its characters
+        raise ValueError("images: expected a sequence of photos or paths, got one path")
     if isinstance(images, np.ndarray) and images.ndim == 3:
         images = [images]
-    items = list(images)  # type: ignore[arg-type]
+    try:
+        items = list(images)  # type: ignore[arg-type]
+    except TypeError:
+        raise ValueError(
+            f"images: expected a sequence of photos or paths, got {type(images).__name__}"
+        ) from None
 
     def load(i: int) -> npt.NDArray[np.uint8]:
         item = items[i]

@@ -397,6 +397,8 @@ def refine_landmarks(frames: Any, detections: FaceDetections) -> FaceDetections:
     """
     import warnings
 
+    if not isinstance(detections, FaceDetections):
+        raise ValueError(f"detections: expected FaceDetections, got {type(detections).__name__}")
     images, _ = _frames_of(frames)
     lm = np.array(detections.landmarks, dtype=np.float64, copy=True)
     noise = (
@@ -412,6 +414,11 @@ def refine_landmarks(frames: Any, detections: FaceDetections) -> FaceDetections:
                 a = np.asarray(img)
                 if a.ndim != 3 or a.shape[2] != 3 or a.dtype != np.uint8:
                     raise ValueError(f"frames: frame {k} is not an (H, W, 3) uint8 RGB image")
+                if (a.shape[1], a.shape[0]) != tuple(detections.size):
+                    raise ValueError(
+                        f"frames: frame {k} is {a.shape[1]}×{a.shape[0]} but the detections "
+                        f"were found in {detections.size[0]}×{detections.size[1]} frames"
+                    )
                 for i in detections.in_frame(k):
                     lm[i], found = _facemesh_one(model, a, detections.box[i], lm[i])
                     if found:
@@ -519,8 +526,10 @@ def detect_faces(
     try:
         for k, img in enumerate(images):
             a = np.asarray(img)
-            if a.ndim != 3 or a.shape[2] != 3 or a.dtype != np.uint8:
-                raise ValueError(f"frames: frame {k} is not an (H, W, 3) uint8 RGB image")
+            if a.ndim != 3 or a.shape[2] != 3 or a.dtype != np.uint8 or 0 in a.shape:
+                raise ValueError(
+                    f"frames: frame {k} is not an (H, W, 3) uint8 RGB image with H, W ≥ 1"
+                )
             s = (int(a.shape[1]), int(a.shape[0]))
             if size is None:
                 size = s
