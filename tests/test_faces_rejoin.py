@@ -401,3 +401,11 @@ def test_repair_and_align_bad_input(circle8, tmp_path):
         repair_joins(dets, cams[:3])
     with pytest.raises(ValueError, match="min_expected"):
         repair_joins(dets, cams, min_expected=0)
+    with pytest.raises(ValueError, match="detections: expected a list"):
+        repair_joins(None, None)
+    with pytest.raises(ValueError, match=r"eye_offsets: expected numbers of shape \(4, 3\)"):
+        repair_joins(dets, cams, eye_offsets="abc")
+    with pytest.raises(ValueError, match="gaze_directions: expected numbers"):
+        repair_joins(dets, cams, gaze_directions=[["a", "b", "c"]] * 4)
+    with pytest.raises(ValueError, match=r"ref\[0\]: expected an integer"):
+        align_by_faces(dets, cams, [0.5], [2, 3])

@@ -2181,7 +2181,10 @@ def _eye_offsets(eye_offsets: npt.ArrayLike | None, V: int) -> FloatArray:
     """``eye_offsets`` checked: ``(V, 3)``, unknown rows (NaN) and ``None`` as zeros."""
     if eye_offsets is None:
         return np.zeros((V, 3))
-    o = np.array(eye_offsets, dtype=np.float64)
+    try:
+        o = np.array(eye_offsets, dtype=np.float64)
+    except (TypeError, ValueError):
+        raise ValueError(f"eye_offsets: expected numbers of shape ({V}, 3)") from None
     if o.shape != (V, 3):
         raise ValueError(f"eye_offsets: expected ({V}, 3) (one per camera), got {o.shape}")
     if np.isinf(o).any():
@@ -2195,7 +2198,10 @@ def _gaze_directions(gaze_directions: npt.ArrayLike | None, V: int) -> FloatArra
     out = np.tile([0.0, 0.0, 1.0], (V, 1))
     if gaze_directions is None:
         return out
-    g = np.array(gaze_directions, dtype=np.float64)
+    try:
+        g = np.array(gaze_directions, dtype=np.float64)
+    except (TypeError, ValueError):
+        raise ValueError(f"gaze_directions: expected numbers of shape ({V}, 3)") from None
     if g.shape != (V, 3):
         raise ValueError(f"gaze_directions: expected ({V}, 3) (one per camera), got {g.shape}")
     if np.isinf(g).any():
@@ -2491,6 +2497,7 @@ def repair_joins(
     camera's frame, as :func:`rejoin_by_head_turns` takes them.
     """
     check_bool(refine, "refine")
+    _check_views(detections, cameras)
     eyes = _eye_offsets(eye_offsets, len(cameras))
     forward = _gaze_directions(gaze_directions, len(cameras))
     expected, found = wearer_sightings(detections, cameras, min_face=min_face,
