@@ -38,7 +38,14 @@ from typing import Any
 import numpy as np
 import numpy.typing as npt
 
-from socialcam._validate import FloatArray, check_bool, check_float, check_int, readonly
+from socialcam._validate import (
+    FloatArray,
+    as_float_array,
+    check_bool,
+    check_float,
+    check_int,
+    readonly,
+)
 
 IntArray = npt.NDArray[np.int64]
 U8Image = npt.NDArray[np.uint8]
@@ -83,11 +90,6 @@ OBLIQUE_WIDTH = 10.0
 MIN_RATE = 1e-6
 
 
-def _integral(x: object) -> bool:
-    """A float that holds a whole number (a frame size read from a file as 1280.0)."""
-    return isinstance(x, (float, np.floating)) and bool(np.isfinite(x)) and float(x).is_integer()
-
-
 # ----------------------------------------------------------------------------- detection
 @dataclass(frozen=True)
 class FaceDetections:
@@ -127,8 +129,12 @@ class FaceDetections:
         size = self.size
         if not isinstance(size, (tuple, list, np.ndarray)) or len(size) != 2:
             raise ValueError(f"size: expected (width, height) of the frames, got {size!r}")
-        w = check_int(int(size[0]) if _integral(size[0]) else size[0], "size[0] (width)", min=1)
-        h = check_int(int(size[1]) if _integral(size[1]) else size[1], "size[1] (height)", min=1)
+        wh = []
+        for x, name in zip(size, ("size[0] (width)", "size[1] (height)"), strict=True):
+            if isinstance(x, (float, np.floating)) and float(x).is_integer():
+                x = int(x)  # a whole float (1280.0, as read from a file) is an integer
+            wh.append(check_int(x, name, min=1))
+        w, h = wh
         frame = np.asarray(self.frame)
         if frame.ndim != 1 or not (np.issubdtype(frame.dtype, np.integer) or frame.size == 0):
             raise ValueError(f"frame: expected a 1-D array of frame indices, got {frame.dtype} "
@@ -142,17 +148,7 @@ class FaceDetections:
                 f"{n_frames} frames searched (n_frames)"
             )
 
-        def arr(value: object, name: str, shape: tuple[int, ...]) -> FloatArray:
-            try:
-                a = np.asarray(value, np.float64)
-            except (TypeError, ValueError) as e:
-                raise ValueError(f"{name}: expected numbers of shape {shape}: {e}") from None
-            if a.shape != shape:
-                raise ValueError(f"{name}: expected shape {shape} (one per detection), "
-                                 f"got {a.shape}")  # fmt: skip
-            return a
-
-        box = arr(self.box, "box", (N, 4))
+        box = as_float_array(self.box, "box", (N, 4), allow_nan=True)  # NaN: named below
         bad_box = ~np.isfinite(box).all(axis=1) | (box[:, 2] <= 0) | (box[:, 3] <= 0)
         if bad_box.any():
             i = int(np.flatnonzero(bad_box)[0])
@@ -160,15 +156,14 @@ class FaceDetections:
                 f"box: detection {i} (frame {int(frame[i])}) is {box[i].tolist()}: boxes must "
                 "be finite with width and height > 0"
             )
-        confidence = arr(self.confidence, "confidence", (N,))
-        if not np.isfinite(confidence).all():
-            raise ValueError("confidence: expected finite scores")
-        landmarks = arr(self.landmarks, "landmarks", (N, 5, 2))
+        confidence = as_float_array(self.confidence, "confidence", (N,))
+        # NaN landmarks may be kept here (reconstruct_faces refuses them, naming the view)
+        landmarks = as_float_array(self.landmarks, "landmarks", (N, 5, 2), allow_nan=True)
         if not isinstance(self.landmark_source, str):
             raise ValueError(f"landmark_source: expected a string, got {self.landmark_source!r}")
         noise = self.landmark_noise
         if noise is not None:
-            noise = arr(noise, "landmark_noise", (N,))
+            noise = as_float_array(noise, "landmark_noise", (N,), allow_nan=True)
         for name, value in (("frame", frame), ("box", box), ("confidence", confidence),
                             ("landmarks", landmarks), ("landmark_noise", noise),
                             ("n_frames", n_frames), ("size", (w, h))):  # fmt: skip
@@ -1456,8 +1451,9 @@ def _frame_step(frame_times: Any) -> float:
 def _nearest_frames(frame_times: Any, times: FloatArray, tol: float) -> IntArray:
     """Per time of ``times`` the index of the nearest of ``frame_times`` (in any order; the
     earlier on a tie), −1 where it is further than ``tol``."""
-    order = np.argsort(np.asarray(frame_times, np.float64), kind="stable")
-    ct = np.asarray(frame_times, np.float64)[order]
+    ft = np.asarray(frame_times, np.float64)
+    order = np.argsort(ft, kind="stable")
+    ct = ft[order]
     if len(ct) == 0:
         return np.full(len(times), -1, np.int64)
     idx = np.clip(np.searchsorted(ct, times), 1, max(1, len(ct) - 1))
@@ -2758,7 +2754,6 @@ def fuse_ego_exo(
     -------
     fused (M, 3) unit directions, kappa (M,), disagreement (M,) radians (NaN without exo)
     """
-    from socialcam._validate import as_float_array
     from socialcam.gazefield import fuse_gaze
 
     a = as_float_array(ego_v, "ego_v", (None, 3))
