@@ -387,6 +387,15 @@ def test_repair_and_align_bad_input(circle8, tmp_path):
     (tmp_path / "g.csv").write_text("person,time,px,py,pz,vx,vy,vz,h\na,0.1,1,2,3,0,0,1\n")
     with pytest.raises(ValueError, match="line 2: 8 fields"):
         read_gaze_csv(tmp_path / "g.csv", ["a"], 10.0)
+    head = "person,time,px,py,pz,vx,vy,vz,h\na,0.1,1,2,3,0,0,1,0.03\n"
+    for row, why in (
+        ("a,0.2,1,2,3,0,0,1,nan", "not finite"),
+        ("a,0.2,1,2,3,0,5,0,0.03", "not a unit vector"),
+        ("a,0.2,1,2,3,0,0,1,-1", "h = -1, must be > 0"),
+    ):
+        (tmp_path / "g.csv").write_text(head + row + "\n")
+        with pytest.raises(ValueError, match=rf"path: .*g\.csv line 3: .*{why}"):
+            read_gaze_csv(tmp_path / "g.csv", ["a"], 10.0)
     with pytest.raises(ValueError, match="ref, group"):
         align_by_faces(dets, cams, [0, 1], [1, 2])
     with pytest.raises(ValueError, match="cameras"):

@@ -2536,7 +2536,8 @@ REPAIRED_DIR = "repaired"
 
 def _gaze_rows(path: str | os.PathLike[str], names: Sequence[str]) -> dict[str, FloatArray]:
     """The rows of ``gaze.csv`` per person of ``names`` found in it: ``(N, 8)`` arrays of
-    ``time, px, py, pz, vx, vy, vz, h`` in the file's order."""
+    ``time, px, py, pz, vx, vy, vz, h`` in the file's order. A row with a value that is not
+    finite, a direction that is not a unit vector or ``h <= 0`` is an error naming the line."""
     rows: dict[str, list[list[float]]] = {}
     lines = Path(path).read_text().splitlines()
     if not lines or lines[0] != GAZE_HEADER:
@@ -2547,7 +2548,14 @@ def _gaze_rows(path: str | os.PathLike[str], names: Sequence[str]) -> dict[str, 
             try:
                 if len(c) != 9:
                     raise ValueError(f"{len(c)} fields, expected 9")
-                rows.setdefault(c[0], []).append([float(x) for x in c[1:9]])
+                r = [float(x) for x in c[1:9]]
+                if not np.isfinite(r).all():
+                    raise ValueError("a value is not finite")
+                if abs(float(np.linalg.norm(r[4:7])) - 1.0) > 1e-4:
+                    raise ValueError("(vx, vy, vz) is not a unit vector")
+                if r[7] <= 0:
+                    raise ValueError(f"h = {r[7]:g}, must be > 0")
+                rows.setdefault(c[0], []).append(r)
             except ValueError as exc:
                 raise ValueError(f"path: {path} line {i}: {exc}") from None
     return {n: np.array(r) for n, r in rows.items()}
