@@ -311,6 +311,31 @@ def test_articulated_bad_input(scene: Scene) -> None:
         sc.Skeleton(["a", "b"], [-1, 0], [0.0, 0.0])
 
 
+def test_coordinates_float64_cannot_hold_are_refused(scene: Scene) -> None:
+    # A scene moved far from the origin keeps its answer until float64's rounding of the
+    # coordinates reaches the bone: 1e6 m away gives the same points (moved), 1e15 m away
+    # gave 35 px of reprojection error silently and is refused; pixels of 1e200 overflowed
+    # to an infinite error and are refused after the solve.
+    x, par, r = scene.px[:, 1], scene.P[:, 0], scene.skeleton.lengths[1]
+    cams = scene.cams
+
+    def moved(off: float) -> sc.Cameras:
+        return sc.Cameras(cams.K, cams.R, cams.C + off, cams.times)
+
+    near = sc.reconstruct_articulated(x, cams, par, r, k=8)
+    far = sc.reconstruct_articulated(x, moved(1e6), par + 1e6, r, k=8)
+    assert np.abs(far.points - 1e6 - near.points).max() < 1e-3 * r
+    for off in (1e15, 1e200):
+        with pytest.raises(ValueError, match=r"parent, cameras: .*float64 rounds"):
+            sc.reconstruct_articulated(x, moved(off), par + off, r, k=8)
+    with pytest.raises(ValueError, match=r"parent, cameras: .*float64 rounds"):
+        sc.reconstruct_articulated(x, cams, par, 1e-300, k=8)
+    with pytest.raises(ValueError, match=r"root, cameras: .*float64 rounds"):
+        sc.reconstruct_skeleton(scene.px, moved(1e15), scene.skeleton, scene.P[:, 0] + 1e15, k=8)
+    with pytest.raises(ValueError, match="overflowed float64"):
+        sc.reconstruct_articulated(x * 1e200, cams, par, r, k=8)
+
+
 # ------------------------------------------------- robust method (issue 12), per joint
 def test_robust_refines_the_length_per_joint(scene: Scene) -> None:
     # Length over-estimated by 5 %, 0.5 px noise, exact parent. The robust refinement of
