@@ -658,6 +658,10 @@ def test_bad_input():
     small = FaceDetections(e0.frame, e0.box, e0.confidence, e0.landmarks, 4, (320, 240))
     with pytest.raises(ValueError, match="K does not belong"):
         reconstruct_faces([small, *empty[1:]], w.cams)
+    # a K of frames twice the size: the principal point at the corner, still inside
+    half = FaceDetections(e0.frame, e0.box, e0.confidence, e0.landmarks, 4, (640, 480))
+    with pytest.raises(ValueError, match=r"50 % of the frame from its centre.*K does not belong"):
+        reconstruct_faces([half, *empty[1:]], w.cams)
     with pytest.raises(ValueError, match="frames searched"):
         bad = FaceDetections(e0.frame, e0.box, e0.confidence, e0.landmarks, 7, (1280, 960))
         reconstruct_faces([bad, *empty[1:]], w.cams)

@@ -88,6 +88,11 @@ OBLIQUE_WIDTH = 10.0
 #: smallest rate (rad/s, rad/s², m/s²) a temporal tie of ``FaceOptions`` takes: a million
 #: times below a head's; smaller rates make the ties' weights overflow
 MIN_RATE = 1e-6
+#: farthest a camera's principal point may lie from the centre of the detections' frames,
+#: as a share of the frame's width / height, before ``K`` is taken for another frame size
+#: (lenses and crops keep it within a few per cent; a K of twice the frames' size puts it
+#: at their corner, 50 %)
+PP_OFF_CENTRE = 0.25
 
 
 # ----------------------------------------------------------------------------- detection
@@ -1382,15 +1387,15 @@ def _check_views(detections: Sequence[FaceDetections], cameras: Sequence[Any]) -
             )
         w, hgt = d.size
         pp = c.K[:, :2, 2]
-        if (
-            (pp[:, 0] < 0).any()
-            or (pp[:, 0] > w).any()
-            or (pp[:, 1] < 0).any()
-            or (pp[:, 1] > hgt).any()
-        ):
+        # a principal point more than PP_OFF_CENTRE of the frame from its centre: K was made
+        # for frames of another size (320×240 frames under a 640×480 K put it at the corner)
+        off = np.abs(pp - [w / 2, hgt / 2]) / [w, hgt]
+        if not (off <= PP_OFF_CENTRE).all():
+            i = int(np.argmax(off.max(axis=1)))
             raise ValueError(
                 f"detections[{v}]: frames are {w}×{hgt} but cameras[{v}] has its principal point "
-                f"at {pp[0].round(1).tolist()}: K does not belong to these images"
+                f"at {pp[i].round(1).tolist()}, {100 * off[i].max():.0f} % of the frame from its "
+                f"centre (at most {100 * PP_OFF_CENTRE:.0f} %): K does not belong to these images"
             )
         bad = ~np.isfinite(d.landmarks).all(axis=(1, 2))
         if bad.any():
