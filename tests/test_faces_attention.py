@@ -108,6 +108,10 @@ def test_matched_scoring_compares_the_same_wearers(scene):
     assert m["groups"] >= 10, m
     np.testing.assert_allclose(m["exo_errors"], m["ego_errors"], rtol=1e-9)
     assert m["ratio"] == pytest.approx(1.0, rel=1e-9)
+    # one (truth frame, looked-at head) key per group, none twice
+    keys = m["keys"]
+    assert keys.shape == (m["groups"], 2), keys.shape
+    assert len({tuple(k) for k in keys.tolist()}) == len(keys)
     # coverage: the ego groups scored; every one when every wearer has an exo ray
     full = face_joint_attention(truth, _ego_as_exo(truth), owner)["matched"]
     assert full["coverage"] == 1.0 and 0.2 < m["coverage"] < 0.9, (full, m)

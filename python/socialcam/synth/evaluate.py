@@ -400,7 +400,8 @@ def face_joint_attention(
     have an exo ray; the charges of their exo rays and, apart, of their own ego rays (no
     other ray in either), scored on the same groups (≥ 2 of these wearers looking at one
     head); ``ratio`` = exo / ego median error, ``exo_errors`` / ``ego_errors`` per group
-    (``inf`` = not found), ``coverage`` the fraction of the ``ego`` groups (instant,
+    (``inf`` = not found) and ``keys`` ``(N, 2)`` (truth frame, looked-at head code) of
+    those groups, ``coverage`` the fraction of the ``ego`` groups (instant,
     looked-at head) scored there (≥ 2 of their wearers with an exo ray). ``exo`` and ``ego_same_groups`` differ in their members: a group
     there counts the people without a camera (whose eye-in-head spread the renderer draws
     in 0.03–0.07, against 0.015–0.035 for the wearers) on the exo side only, and the
@@ -501,6 +502,7 @@ def face_joint_attention(
         ),
         "exo_errors": np.array(m_exo["all"], np.float64),
         "ego_errors": np.array(m_ego["all"], np.float64),
+        "keys": np.array(m_exo["keys"], np.int64).reshape(-1, 2),
     }
     return {
         "exo": ex,
