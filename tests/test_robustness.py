@@ -383,3 +383,57 @@ def test_strict_raises_convergence_error_where_documented():
     assert not sc.reconstruct_trajectory(xt, cams, k=4, max_iter=1).converged
     assert sc.reconstruct_trajectory(xt, cams, k=4, strict=True).converged
     assert issubclass(sc.ConvergenceError, RuntimeError)
+
+
+def test_a_scene_far_from_the_origin_keeps_its_answer_or_is_refused():
+    # Geo-referenced scenes (UTM, ECEF: 1e6-1e7 m) keep their answers; trajectories are
+    # solved about the cameras' mean centre, so even 1e10 m does (before, 1e10 m read as a
+    # still camera); where float64 rounds the coordinates by more than a thousandth of the
+    # scene (1e15 m for metres of motion) the call names the argument instead of returning
+    # a result moved by the rounding (0.1 m) or no charge at all.
+    cams = ring(40)
+    t = np.asarray(cams.times)
+    X = np.c_[0.3 * np.sin(t), 0.2 * np.cos(2 * t), 1.0 + 0.1 * t]
+    x = cams.project_trajectory(X)
+    rng = np.random.default_rng(3)
+    x = x + rng.normal(0, 0.3, x.shape)
+    statics = rng.normal(0, 0.5, (5, 3))
+    xs = np.asarray(cams.project(statics)).transpose(1, 0, 2)  # (5, 40, 2)
+    eyes = rng.normal(0, 1, (5, 3))
+    v = np.array([0.0, 1.0, 2.0]) - eyes
+    v /= np.linalg.norm(v, axis=1, keepdims=True)
+
+    def moved(off: float) -> sc.Cameras:
+        return sc.Cameras(cams.K, cams.R, cams.C + off, cams.times)
+
+    near = sc.reconstruct_trajectory(x, cams, k=6)
+    batch = sc.reconstruct_trajectories(np.stack([x, np.full_like(x, np.nan)]), moved(1e6), k=6)
+    assert batch.failures[1] is not None and (batch.coeffs[1] == 0).all()
+    for off in (6.4e6, 1e10):
+        far = sc.reconstruct_trajectory(x, moved(off), k=6)
+        assert np.abs(far.points - off - near.points).max() < 1e-4, off
+        # the coefficients moved with the points: .at() agrees with .points
+        assert np.abs(far.at(t) - far.points).max() < 1e-4 * max(1.0, off * 1e-9)
+    with pytest.raises(ValueError, match=r"cameras\.C: .*float64 rounds"):
+        sc.reconstruct_trajectory(x, moved(1e15), k=6)
+
+    tri = sc.triangulate(xs, cams)
+    assert np.abs(sc.triangulate(xs, moved(6.4e6)) - 6.4e6 - tri).max() < 1e-6
+    with pytest.raises(ValueError, match=r"cameras\.C: .*float64 rounds"):
+        sc.triangulate(xs, moved(1e15))
+
+    def charges(off: float) -> list[sc.Charge]:
+        return sc.find_charges(sc.GazeRays(eyes + off, v, np.full(5, 0.03)), seed=0)
+
+    (c0,) = charges(0.0)
+    (c1,) = charges(6.4e6)
+    assert np.abs(c1.position - 6.4e6 - c0.position).max() < 1e-6
+    with pytest.raises(ValueError, match=r"rays\.p: .*float64 rounds"):
+        charges(1e15)
+    with pytest.raises(ValueError, match=r"frames\[0\]\.p: .*float64 rounds"):
+        sc.find_charges_sequence([sc.GazeRays(eyes + 1e15, v, np.full(5, 0.03))], seed=0)
+    f0 = sc.GazeField.fit([(eyes, v)], n_charges=1, kappa=20.0)
+    f1 = sc.GazeField.fit([(eyes + 6.4e6, v)], n_charges=1, kappa=20.0)
+    assert np.abs(f1.charges[0] - 6.4e6 - f0.charges[0]).max() < 1e-6
+    with pytest.raises(ValueError, match=r"frames\[\*\]\.p: .*float64 rounds"):
+        sc.GazeField.fit([(eyes + 1e15, v)], n_charges=1, kappa=20.0)

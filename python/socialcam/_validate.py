@@ -43,6 +43,27 @@ def as_float_array(
     return arr
 
 
+#: largest share of a scene's extent that float64's rounding of its coordinates may take
+#: (:func:`check_rounding`)
+ROUNDING_SHARE = 1e-3
+
+
+def check_rounding(coords: np.ndarray, extent: float, name: str, what: str) -> None:
+    """Refuses coordinates so far from the origin that float64 rounds them (``eps`` times
+    their size) by more than ``ROUNDING_SHARE`` of ``extent`` metres, the size that matters
+    to the geometry (``what``: "the bone", "their spread"); a zero extent passes (the
+    caller's degeneracy checks name it). Translation is otherwise harmless: a scene at
+    1e6 m (UTM, ECEF) keeps its answers."""
+    reach = float(np.abs(coords).max(initial=0.0))
+    rounding = reach * float(np.finfo(np.float64).eps)
+    if extent > 0 and rounding > ROUNDING_SHARE * extent:
+        raise ValueError(
+            f"{name}: coordinates up to {reach:.3g} m from the origin; float64 rounds them by "
+            f"{rounding:.2g} m, more than {ROUNDING_SHARE:g} of {what} ({extent:.3g} m): "
+            "subtract a point of the scene from every position"
+        )
+
+
 def check_seed(seed: object, name: str = "seed") -> int:
     """Seeds are integers in ``[0, 2⁶⁴)`` (the core's seed is a u64)."""
     if (

@@ -25,6 +25,7 @@ from socialcam._validate import (
     check_choice,
     check_float,
     check_int,
+    check_rounding,
     readonly,
 )
 from socialcam.camera import Cameras
@@ -276,25 +277,13 @@ def _check_cameras(cameras: object) -> Cameras:
     return cameras
 
 
-#: Largest share of a bone that float64's rounding of the scene's coordinates may take
-#: (:func:`_check_scale`).
-_ROUNDING_SHARE = 1e-3
-
-
 def _check_scale(parent: FloatArray, cameras: Cameras, length: float, name: str) -> None:
-    """Refuses coordinates so far from the origin that float64 rounds them by more than
-    ``_ROUNDING_SHARE`` of the bone ``length``: the rays' intersections with the sphere
-    about the parent are then lost in the rounding (a scene shifted by 1e15 m for a
-    0.3 m bone gave 35 px of reprojection error and no error message)."""
-    reach = max(float(np.abs(parent).max(initial=0.0)), float(np.abs(cameras.C).max(initial=0.0)))
-    rounding = reach * float(np.finfo(np.float64).eps)
-    if rounding > _ROUNDING_SHARE * length:
-        raise ValueError(
-            f"{name}, cameras: coordinates up to {reach:.3g} m for a bone of {length:.3g} m; "
-            f"float64 rounds them by {rounding:.2g} m, more than {_ROUNDING_SHARE:g} of the "
-            f"bone (is the bone's length in metres?); far from the origin, subtract a point "
-            f"of the scene (e.g. {name}'s first row) from {name} and the camera centres"
-        )
+    """Refuses coordinates so far from the origin that float64's rounding of them is a
+    noticeable part of the bone ``length``: the rays' intersections with the sphere about
+    the parent are then lost in the rounding (a scene shifted by 1e15 m for a 0.3 m bone
+    gave 35 px of reprojection error and no error message)."""
+    both = np.concatenate([parent.reshape(-1, 3), cameras.C.reshape(-1, 3)])
+    check_rounding(both, length, f"{name}, cameras", "the bone (is its length in metres?)")
 
 
 def _times(cameras: Cameras) -> FloatArray:

@@ -29,6 +29,7 @@ from socialcam._validate import (
     check_choice,
     check_float,
     check_int,
+    check_rounding,
     check_seed,
     check_sequence,
     readonly,
@@ -108,13 +109,17 @@ class GazeRays:
 
 
 def _rays(rays: GazeRays | tuple[Any, ...], name: str = "rays") -> GazeRays:
-    if isinstance(rays, GazeRays):
-        return rays
-    if not isinstance(rays, (tuple, list)) or len(rays) not in (3, 4):
-        raise ValueError(
-            f"{name}: expected a GazeRays or a tuple (p, v, h[, ids]), got {type(rays).__name__}"
-        )
-    return GazeRays(*rays)
+    if not isinstance(rays, GazeRays):
+        if not isinstance(rays, (tuple, list)) or len(rays) not in (3, 4):
+            raise ValueError(
+                f"{name}: expected a GazeRays or a tuple (p, v, h[, ids]), "
+                f"got {type(rays).__name__}"
+            )
+        rays = GazeRays(*rays)
+    # eyes 1e15 m from the origin are rounded by 0.1 m: charges moved by that, or lost
+    spread = float(np.ptp(rays.p, axis=0).max()) if len(rays.p) else 0.0
+    check_rounding(rays.p, spread, f"{name}.p", "the eyes' spread")
+    return rays
 
 
 def saliency_field(rays: GazeRays, points: npt.ArrayLike) -> FloatArray:
@@ -498,6 +503,13 @@ def find_charges(
     -------
     list of :class:`Charge`, strongest first. A single ray, or rays that never meet, give
     an empty list. Same ``seed``, same answer, whatever the number of threads.
+
+    Raises
+    ------
+    ValueError
+        Bad rays or options; eyes so far from the origin that float64 rounds them by more
+        than a thousandth of their spread (1e15 m for a room: the charges would move by
+        the rounding, or vanish).
     """
     r = _rays(rays)
     return _run([r], seed, _options(options, overrides))[0]

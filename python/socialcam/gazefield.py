@@ -39,6 +39,7 @@ from socialcam._validate import (
     check_choice,
     check_float,
     check_int,
+    check_rounding,
     check_seed,
     readonly,
 )
@@ -221,8 +222,11 @@ def _flatten(frames: Sequence[object], default_h: float = 0.1) -> _Flat:
         ids.append(i)
         counts.append(n)
     off = np.concatenate([[0], np.cumsum(counts)]).astype(np.int64)
+    eyes = np.concatenate(ps).reshape(-1, 3)
+    spread = float(np.ptp(eyes, axis=0).max()) if len(eyes) else 0.0
+    check_rounding(eyes, spread, "frames[*].p", "the eyes' spread")
     return _Flat(
-        np.concatenate(ps).reshape(-1, 3),
+        eyes,
         np.concatenate(vs).reshape(-1, 3),
         np.concatenate(hs),
         np.concatenate(ids).astype(np.int64),

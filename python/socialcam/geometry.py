@@ -14,6 +14,7 @@ from socialcam._validate import (
     as_float_array,
     check_float,
     check_int,
+    check_rounding,
     check_size,
     readonly,
 )
@@ -114,7 +115,8 @@ def triangulate(
     DegenerateError
         Single-point form only: fewer than two views, or parallel rays.
     ValueError
-        Wrong shapes, infinite values, mismatched number of views.
+        Wrong shapes, infinite values, mismatched number of views; camera centres so far
+        from the origin that float64 rounds them by more than a thousandth of their spread.
     ConvergenceError
         ``strict=True`` and some point did not converge.
     """
@@ -132,6 +134,9 @@ def triangulate(
         raise ValueError(
             f"x: expected shape ({v}, 2) or (N, {v}, 2) for {v} cameras, got {np.shape(x)}"
         )
+    if v:
+        spread = float(np.ptp(cameras.C, axis=0).max())
+        check_rounding(cameras.C, spread, "cameras.C", "the cameras' spread")
     X, rms, rms0, views, conv, why = _core.triangulate(
         cameras.K, cameras.R, cameras.C, x_, bool(refine), n_iter
     )

@@ -23,6 +23,7 @@ from socialcam._validate import (
     as_float_array,
     check_choice,
     check_int,
+    check_rounding,
     check_size,
     readonly,
 )
@@ -335,16 +336,29 @@ def _run(
     keep_covariance: bool,
     strict: bool,
 ) -> dict[str, Any]:
+    # Solved about the camera centres' mean, then moved back: the linear system of Eq 5.7
+    # carries the centres, and far from the origin (a scene at 1e9 m) their size swamps
+    # the point's motion in float64 (1e10 m read as a still camera).
+    origin = cameras.C.mean(axis=0)
+    spread = float(np.ptp(cameras.C, axis=0).max()) if len(cameras) else 0.0
+    check_rounding(cameras.C, spread, "cameras.C", "the camera's motion")
     result: dict[str, Any] = _core.reconstruct_trajectories(
         cameras.K,
         cameras.R,
-        cameras.C,
+        np.ascontiguousarray(cameras.C - origin),
         times,
         x,
         options,
         keep_covariance=keep_covariance,
         strict=strict,
     )
+    if origin.any():
+        result["points"] = result["points"] + origin
+        # X(t) = Σ θ_j(t) β_j with θ_0 = sqrt(1/n_norm): the shift enters β_0 alone
+        coeffs = np.array(result["coeffs"], dtype=np.float64)
+        solved = np.array([f is None for f in result["failures"]], dtype=bool)
+        coeffs[solved, 0] += origin * np.sqrt(float(result["span"][2]))
+        result["coeffs"] = coeffs
     return result
 
 
@@ -382,7 +396,10 @@ def reconstruct_trajectory(
         ``rank(QΘ) < 3K``: too few observations for ``K``, a still camera, or a camera
         moving like the point (Theorem 2) — the message says which.
     ValueError
-        Bad shapes, NaN in cameras, non-finite times, all observations missing, bad options.
+        Bad shapes, NaN in cameras, non-finite times, all observations missing, bad options;
+        camera centres so far from the origin that float64 rounds them by more than a
+        thousandth of their motion (the solve itself is about their mean, so a scene at
+        1e10 m gives the answer it gives at the origin).
     ConvergenceError
         ``strict=True`` and the refinement did not converge.
     """

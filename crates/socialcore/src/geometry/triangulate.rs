@@ -74,16 +74,18 @@ pub fn triangulate_dlt(views: &[(&Camera, Vector2<f64>)]) -> Result<Vector3<f64>
     if s <= f64::EPSILON {
         s = 1.0;
     }
+    // One centre for every view: rays in different directions meet only there, so the
+    // linear solution would be that centre (a point at depth 0), not the point.
+    let baseline = views
+        .iter()
+        .map(|(c, _)| (c.c - mu).norm())
+        .fold(0.0, f64::max);
+    if baseline <= f64::EPSILON * mu.norm().max(1.0) {
+        return Err(Error::degenerate(
+            "all views share one camera centre: no baseline to triangulate from",
+        ));
+    }
     if max_angle < MIN_TRIANGULATION_ANGLE {
-        let baseline = views
-            .iter()
-            .map(|(c, _)| (c.c - mu).norm())
-            .fold(0.0, f64::max);
-        if baseline <= f64::EPSILON * mu.norm().max(1.0) {
-            return Err(Error::degenerate(
-                "all views share one camera centre: no baseline to triangulate from",
-            ));
-        }
         return Err(Error::degenerate(format!(
             "the rays are parallel (largest angle between them {max_angle:.1e} rad): the point is at infinity"
         )));
@@ -349,6 +351,17 @@ mod tests {
             triangulate_point(&same, &px, true, &LmOptions::default()),
             Err(Error::Degenerate(_))
         ));
+        // One centre, turned heads: the rays differ in direction but meet only at the
+        // centre, which the linear solution used to return as the point.
+        let turned: Vec<Camera> = cams
+            .iter()
+            .map(|c| Camera::new(c.k, c.r, cams[0].c, 0).unwrap())
+            .collect();
+        let px: Vec<_> = turned.iter().map(|c| Some(c.project(&x).0)).collect();
+        match triangulate_point(&turned, &px, true, &LmOptions::default()) {
+            Err(Error::Degenerate(m)) => assert!(m.contains("one camera centre"), "{m}"),
+            other => panic!("expected Degenerate, got {other:?}"),
+        }
     }
 
     #[test]
