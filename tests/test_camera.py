@@ -166,3 +166,57 @@ def test_from_colmap_errors(tmp_path):
     _write_colmap_text(tmp_path)
     with pytest.raises(ValueError, match="image_names"):
         sc.Cameras.from_colmap(tmp_path, image_names=["zzz.png"])
+
+
+def test_from_colmap_damaged_models_are_errors_naming_the_file(tmp_path):
+    # pycolmap loops without end on an images.bin cut after its count, reads other binary
+    # files cut short as far as they go, and fails on broken ones with its own exceptions.
+    import pycolmap
+
+    _write_colmap_text(tmp_path)
+    good = tmp_path / "bin"
+    good.mkdir()
+    pycolmap.Reconstruction(str(tmp_path)).write_binary(str(good))
+    assert len(sc.Cameras.from_colmap(good)) == 2
+    for name in ("images.bin", "cameras.bin", "points3D.bin", "rigs.bin", "frames.bin"):
+        if not (good / name).exists():  # pycolmap before rigs and frames
+            continue
+        data = (good / name).read_bytes()
+        for cut in sorted({4, 8, len(data) // 2, len(data) - 1} - {len(data)}):
+            bad = tmp_path / f"{name}_{cut}"
+            bad.mkdir()
+            for f in good.iterdir():
+                (bad / f.name).write_bytes(f.read_bytes() if f.name != name else data[:cut])
+            with pytest.raises(ValueError, match="reconstruction: ") as err:
+                sc.Cameras.from_colmap(bad)
+            assert name in str(err.value) or str(bad) in str(err.value), err.value
+    garbage = tmp_path / "garbage"
+    garbage.mkdir()
+    (garbage / "cameras.txt").write_text("1 PINHOLE 640 480 500 510 320.5 240.5\n")
+    (garbage / "images.txt").write_text("1 1 0 0 0 0.5 -0.2 3 7 a.png\n\n")  # camera 7
+    (garbage / "points3D.txt").write_text("")
+    with pytest.raises(ValueError, match="cannot read the COLMAP model"):
+        sc.Cameras.from_colmap(garbage)
+    twice = tmp_path / "twice"
+    twice.mkdir()
+    _write_colmap_text(twice)
+    (twice / "images.txt").write_text(
+        "1 1 0 0 0 0.5 -0.2 3 1 a.png\n\n2 1 0 0 0 0.1 -0.2 3 2 a.png\n\n"
+    )
+    with pytest.raises(ValueError, match=r"registered twice: \['a.png'\]"):
+        sc.Cameras.from_colmap(twice)
+    with pytest.raises(ValueError, match="reconstruction: expected a folder"):
+        sc.Cameras.from_colmap(3)  # type: ignore[arg-type]
+
+
+def test_indexing_takes_integers_slices_and_masks_only():
+    cams = _rig()
+    n = len(cams)
+    assert len(cams[[0, 2]]) == 2 and len(cams[np.arange(n) % 2 == 0]) == (n + 1) // 2
+    np.testing.assert_array_equal(cams[-1].C, cams.C[-1:])
+    assert len(cams[[]]) == 0 and repr(cams.with_times(np.arange(n))[1:1]) == "Cameras(F=0)"
+    # None, a bool, a 2-D array, floats, a mask of another length, out of range: IndexError
+    # (None and np.True_ used to add an axis and fail later deep in the core; True meant 1)
+    for bad in (None, True, np.True_, np.array([[0, 1]]), [0.5], [n], "a", np.ones(n + 1, bool)):
+        with pytest.raises(IndexError, match="camera index"):
+            cams[bad]

@@ -2,6 +2,7 @@
 
 from __future__ import annotations
 
+import itertools
 import os
 from collections.abc import Sequence
 from typing import Any, overload
@@ -103,7 +104,7 @@ class Cameras:
     def __repr__(self) -> str:
         t = (
             ""
-            if self._times is None
+            if self._times is None or len(self._times) == 0
             else f", times=[{self._times.min():.3f}, {self._times.max():.3f}] s"
         )
         return f"Cameras(F={len(self)}{t})"
@@ -113,12 +114,33 @@ class Cameras:
     @overload
     def __getitem__(self, index: slice | Sequence[int] | npt.NDArray[Any]) -> Cameras: ...
     def __getitem__(self, index: Any) -> Cameras:
-        """Sub-sequence of cameras; an integer gives a one-camera sequence."""
+        """Sub-sequence of cameras: an integer gives a one-camera sequence; a slice, a 1-D
+        array or sequence of integers, or a boolean mask of length ``F`` select several."""
+        n = len(self)
+        if isinstance(index, (bool, np.bool_)):
+            raise IndexError("camera index: a bool is not an index (use a mask of length F)")
         if isinstance(index, (int, np.integer)):
-            n = len(self)
             if not -n <= int(index) < n:
                 raise IndexError(f"camera index {index} out of range for {n} cameras")
             index = slice(int(index), int(index) + 1 if int(index) != -1 else None)
+        elif not isinstance(index, slice):
+            arr = np.asarray(index)
+            if arr.ndim != 1 or not (
+                np.issubdtype(arr.dtype, np.integer)
+                or (arr.dtype == np.bool_ and len(arr) == n)
+                or len(arr) == 0
+            ):
+                raise IndexError(
+                    f"camera index: expected an integer, a slice, 1-D integers or a mask of "
+                    f"{n} bools, got {type(index).__name__} of shape {arr.shape} ({arr.dtype})"
+                )
+            if arr.dtype != np.bool_ or len(arr) == 0:
+                arr = arr.astype(np.int64)
+                if len(arr) and not ((-n <= arr) & (arr < n)).all():
+                    raise IndexError(
+                        f"camera index out of range for {n} cameras: {arr.tolist()[:5]}"
+                    )
+            index = arr
         out = Cameras.__new__(Cameras)
         out._K = readonly(np.ascontiguousarray(self._K[index]))
         out._R = readonly(np.ascontiguousarray(self._R[index]))
@@ -264,13 +286,14 @@ class Cameras:
 
         rec = reconstruction
         if not isinstance(rec, pycolmap.Reconstruction):
-            path = os.fspath(rec)
-            if not os.path.isdir(path):
-                raise ValueError(f"reconstruction: {path!r} is not a folder")
-            rec = pycolmap.Reconstruction(path)
+            rec = _read_colmap(rec)
         by_name = {img.name: img for img in rec.images.values()}
         if not by_name:
             raise ValueError("reconstruction: has no registered images")
+        if len(by_name) != len(rec.images):
+            names_all = sorted(img.name for img in rec.images.values())
+            twice = sorted({n for a, n in itertools.pairwise(names_all) if a == n})
+            raise ValueError(f"reconstruction: image names registered twice: {twice[:5]}")
         names = sorted(by_name) if image_names is None else list(image_names)
         missing = [n for n in names if n not in by_name]
         if missing:
@@ -323,3 +346,83 @@ class Cameras:
             "C": self._C.tolist(),
             "times": None if self._times is None else self._times.tolist(),
         }
+
+
+def _colmap_bin_problem(path: str) -> str | None:
+    """What is wrong with the length of a COLMAP binary file, or ``None``. Every file
+    starts with its record count (each record takes at least a byte); ``images.bin`` and
+    ``points3D.bin`` are walked record by record (image: id, quaternion, translation,
+    camera id, NUL-ended name, 2D point count, 24 bytes per point; point: id, position,
+    colour, error, track length, 8 bytes per track element). pycolmap loops without end,
+    or reserves memory for minutes, on such files cut short."""
+    with open(path, "rb") as f:
+        data = f.read()
+    n, at = len(data), 8
+    if n < 8:
+        return "shorter than its record count"
+    count = int.from_bytes(data[:8], "little")
+    if count > n:
+        return f"a count of {count} records in {n} bytes"
+    kind = os.path.basename(path)
+    for i in range(count if kind in ("images.bin", "points3D.bin") else 0):
+        if kind == "images.bin":
+            end = data.find(b"\0", at + 64) if at + 64 <= n else -1
+            head = end + 1
+        else:
+            head = at + 43
+        if head <= 0 or head + 8 > n:
+            return f"cut short in record {i} of {count}"
+        step = 24 if kind == "images.bin" else 8
+        at = head + 8 + step * int.from_bytes(data[head : head + 8], "little")
+        if at > n:
+            return f"cut short in record {i} of {count}"
+    if kind in ("images.bin", "points3D.bin") and at != n:
+        return f"{n - at} bytes after its {count} records"
+    return None
+
+
+def _read_colmap(folder: object) -> Any:
+    """``pycolmap.Reconstruction`` of a model folder, or a ``ValueError`` naming the
+    folder and the file when it cannot be read whole: pycolmap reads a binary file cut
+    short as far as it goes (or loops without end), so a binary model is written back
+    and compared file by file."""
+    import tempfile
+
+    import pycolmap
+
+    try:
+        path = os.fspath(folder)  # type: ignore[call-overload]
+    except TypeError:
+        raise ValueError(
+            f"reconstruction: expected a folder or a pycolmap.Reconstruction, got "
+            f"{type(folder).__name__}"
+        ) from None
+    if not os.path.isdir(path):
+        raise ValueError(f"reconstruction: {path!r} is not a folder")
+    binary = os.path.isfile(os.path.join(path, "images.bin")) and not os.path.isfile(
+        os.path.join(path, "images.txt")
+    )
+    for name in ("cameras.bin", "images.bin", "points3D.bin", "rigs.bin", "frames.bin"):
+        file = os.path.join(path, name)
+        if binary and os.path.isfile(file):
+            why = _colmap_bin_problem(file)
+            if why:
+                raise ValueError(f"reconstruction: {file} is damaged ({why})")
+    try:
+        rec = pycolmap.Reconstruction(path)
+    except (ValueError, IndexError, RuntimeError, MemoryError) as exc:
+        raise ValueError(f"reconstruction: cannot read the COLMAP model in {path}: {exc}") from None
+    if binary:
+        with tempfile.TemporaryDirectory() as again:
+            rec.write_binary(again)
+            for name in sorted(os.listdir(again)):
+                mine = os.path.join(path, name)
+                if os.path.isfile(mine) and os.path.getsize(mine) != os.path.getsize(
+                    os.path.join(again, name)
+                ):
+                    raise ValueError(
+                        f"reconstruction: {mine} is cut short or damaged: it holds "
+                        f"{os.path.getsize(mine)} bytes, what pycolmap reads of it "
+                        f"{os.path.getsize(os.path.join(again, name))}"
+                    )
+    return rec
