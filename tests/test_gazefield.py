@@ -207,6 +207,9 @@ def test_bad_input_is_refused_with_defined_behaviour():
         GazeField.fit([(bad, v)], n_charges=1)
     with pytest.raises(ValueError, match=r"frames\[0\]\.v"):
         GazeField.fit([(p, 2 * v)], n_charges=1)
+    # bandwidths: one for all rays or one per ray; three for eight rays is named
+    with pytest.raises(ValueError, match=r"frames\[0\]\.h: expected one bandwidth or 8"):
+        GazeField.fit([(p, v, np.full(3, 0.1))], n_charges=1)
     field = GazeField.fit([(p, v)], n_charges=1, kappa=10.0)
     with pytest.raises(ValueError, match="points"):
         field.predict(np.array([[np.nan, 0.0, 0.0]]))

@@ -194,11 +194,16 @@ def _flatten(frames: Sequence[object], default_h: float = 0.1) -> _Flat:
         if (np.abs(norms - 1.0) > UNIT_TOLERANCE).any():
             j = int(np.argmax(np.abs(norms - 1.0)))
             raise ValueError(f"frames[{k}].v: direction {j} has norm {norms[j]:.6g}, not 1")
-        h = (
-            np.full(n, default_h)
-            if h_ is None
-            else np.broadcast_to(as_float_array(h_, f"frames[{k}].h"), (n,)).astype(np.float64)
-        )
+        if h_ is None:
+            h = np.full(n, default_h)
+        else:
+            h = as_float_array(h_, f"frames[{k}].h")
+            if h.shape not in ((), (1,), (n,)):
+                raise ValueError(
+                    f"frames[{k}].h: expected one bandwidth or {n} (one per ray), got shape "
+                    f"{h.shape}"
+                )
+            h = np.broadcast_to(h, (n,)).astype(np.float64)
         if (h <= 0).any():
             raise ValueError(f"frames[{k}].h: bandwidths must be > 0")
         if i_ is None:
