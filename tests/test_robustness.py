@@ -432,6 +432,15 @@ def test_a_scene_far_from_the_origin_keeps_its_answer_or_is_refused():
         charges(1e15)
     with pytest.raises(ValueError, match=r"frames\[0\]\.p: .*float64 rounds"):
         sc.find_charges_sequence([sc.GazeRays(eyes + 1e15, v, np.full(5, 0.03))], seed=0)
+    from socialcam.synth.calibration import fixation_segment
+
+    head = fixation_segment(30, seed=0).cameras
+    g0 = sc.calibrate_gaze(head)
+    g1 = sc.calibrate_gaze(head.moved(np.eye(3), [6.4e6, 0.0, 0.0]))  # returned its start
+    assert g1.converged and np.abs(g1.v - g0.v).max() < 1e-8
+    np.testing.assert_allclose(g1.y - [6.4e6, 0.0, 0.0], g0.y, atol=1e-6)
+    with pytest.raises(ValueError, match=r"cameras\.C: .*float64 rounds"):
+        sc.calibrate_gaze(head.moved(np.eye(3), [1e15, 0.0, 0.0]))
     f0 = sc.GazeField.fit([(eyes, v)], n_charges=1, kappa=20.0)
     f1 = sc.GazeField.fit([(eyes + 6.4e6, v)], n_charges=1, kappa=20.0)
     assert np.abs(f1.charges[0] - 6.4e6 - f0.charges[0]).max() < 1e-6

@@ -23,7 +23,7 @@ from typing import Any
 import numpy as np
 
 from socialcam import _core
-from socialcam._validate import FloatArray, check_float, check_int, readonly
+from socialcam._validate import FloatArray, check_float, check_int, check_rounding, readonly
 from socialcam.camera import Cameras
 
 __all__ = ["DEFAULT_H", "GazeCalibration", "calibrate_gaze"]
@@ -147,7 +147,8 @@ def calibrate_gaze(
     Raises
     ------
     ValueError
-        Fewer than 5 frames, non-finite poses, bad options.
+        Fewer than 5 frames, non-finite poses, bad options; centres so far from the origin
+        that float64 rounds them by more than a thousandth of the head's motion.
     socialcam.DegenerateError
         The head did not move (parallel optical axes) or the axes do not converge in front of
         the cameras.
@@ -158,12 +159,19 @@ def calibrate_gaze(
     lambda_axis = check_float(lambda_axis, "lambda_axis", min=0.0)
     max_iter = check_int(max_iter, "max_iter", min=1, max=1_000_000)
     tol = check_float(tol, "tol", min=0.0)
-    d = _core.calibrate_gaze(cameras.R, cameras.C, lambda_c, lambda_axis, max_iter, tol)
+    # solved about the centres' mean (the fixation point y moves back): far from the
+    # origin (1e6 m) the head's centimetres of motion were lost and the start returned
+    spread = float(np.ptp(cameras.C, axis=0).max()) if len(cameras) else 0.0
+    check_rounding(cameras.C, spread, "cameras.C", "the head's motion")
+    origin = cameras.C.mean(axis=0) if len(cameras) else np.zeros(3)
+    d = _core.calibrate_gaze(
+        cameras.R, np.ascontiguousarray(cameras.C - origin), lambda_c, lambda_axis, max_iter, tol
+    )
     return GazeCalibration(
         p=readonly(np.asarray(d["p"])),
         v=readonly(np.asarray(d["v"])),
         h=float(d["h"]),
-        y=readonly(np.asarray(d["y"])),
+        y=readonly(np.asarray(d["y"]) + origin),
         p_std=readonly(np.asarray(d["p_std"])),
         v_std=float(d["v_std"]),
         y_std=readonly(np.asarray(d["y_std"])),
