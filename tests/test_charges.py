@@ -763,3 +763,33 @@ def test_plots_return_figures():
     import matplotlib.pyplot as plt
 
     plt.close("all")
+
+
+def test_overflowing_rays_and_bad_charges_are_refused_by_name():
+    # |v| of 1e200 normalised to a zero "unit" vector; h of 1e-160 gave a NaN field; a
+    # box of ±1e308 a grid of NaN; track_charges took memberships of another length than
+    # their ids (broadcast or a numpy error), NaN memberships and a person twice
+    r = sc.GazeRays([[0.0, 0, 0]], [[0.0, 0, 1e200]], 0.1, normalize=True)
+    np.testing.assert_array_equal(r.v, [[0.0, 0.0, 1.0]])
+    with pytest.raises(ValueError, match="v: direction 0 has norm inf"):
+        sc.GazeRays([[0.0, 0, 0]], [[0.0, 0, 1e200]], 0.1)
+    with pytest.raises(ValueError, match="h: bandwidths must be >= 1e-100"):
+        sc.GazeRays([[0.0, 0, 0]], [[0.0, 0, 1.0]], 1e-160)
+    two = sc.GazeRays([[0.0, 0, 0], [1.0, 0, 0]], [[0.0, 0, 1], [0.0, 0, 1]], 0.1)
+    d45 = np.array([1.0, 0.0, 1.0]) / np.sqrt(2)
+    near, far = sc.saliency_field(two, np.array([d45 * 1e3, d45 * 1e200]))
+    assert far == pytest.approx(near, rel=1e-3) and far < 1e-20  # was the peak, 3.99
+    with pytest.raises(ValueError, match="lo, hi: the box's size overflows"):
+        sc.saliency_grid(two, [-1e308] * 3, [1e308] * 3, shape=4)
+    frames = synth.meeting(n_frames=3, seed=0).ray_frames()
+    c = next(ch for cs in sc.find_charges_sequence(frames) for ch in cs)
+    for bad, why in (
+        (dataclasses.replace(c, membership=c.membership[:1]), "membership: expected one value"),
+        (
+            dataclasses.replace(c, membership=np.full_like(c.membership, np.nan)),
+            "membership: contains NaN",
+        ),
+        (dataclasses.replace(c, ids=np.zeros_like(c.ids)), "ids: a person appears twice"),
+    ):
+        with pytest.raises(ValueError, match=rf"charges_per_frame\[1\]\[0\]\.{why}"):
+            sc.track_charges([[c], [bad]], min_length=1)

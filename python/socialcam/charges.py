@@ -45,6 +45,17 @@ IntArray = npt.NDArray[np.int64]
 UNIT_TOLERANCE = 1e-6
 
 
+def _norms(v: FloatArray) -> FloatArray:
+    """Row norms; a row too long for float64 (1e200) is ``inf``, without a warning."""
+    with np.errstate(over="ignore"):
+        return np.asarray(np.linalg.norm(v, axis=1))
+
+
+#: smallest bandwidth ``h`` (metres) a ray may have: the field's ``1/h²`` overflows below
+#: about 1e-154 (an atom is 1e-10 m)
+MIN_H = 1e-100
+
+
 @dataclass(frozen=True)
 class GazeRays:
     """The primary gaze rays of one frame (Sec 3.1).
@@ -72,12 +83,15 @@ class GazeRays:
         if n == 0:
             raise ValueError("p: need at least one gaze ray, got 0")
         v = as_float_array(self.v, "v", (n, 3))
-        norms = np.linalg.norm(v, axis=1)
         if normalize:
-            if (norms == 0).any():
-                raise ValueError(f"v: direction {int(np.argmin(norms))} is zero")
-            v = v / norms[:, None]
-        elif (np.abs(norms - 1.0) > UNIT_TOLERANCE).any():
+            # scaled by the largest component first: |v| of 1e200 overflows to inf (and
+            # v / inf is a zero "unit" vector), of 1e-170 underflows to 0
+            big = np.abs(v).max(axis=1)
+            if (big == 0).any():
+                raise ValueError(f"v: direction {int(np.argmin(big))} is zero")
+            v = v / big[:, None]
+            v = v / np.linalg.norm(v, axis=1)[:, None]
+        elif (np.abs((norms := _norms(v)) - 1.0) > UNIT_TOLERANCE).any():
             i = int(np.argmax(np.abs(norms - 1.0)))
             raise ValueError(
                 f"v: direction {i} has norm {norms[i]:.6g}; directions must be unit "
@@ -85,8 +99,11 @@ class GazeRays:
             )
         # A scalar is every ray's bandwidth.
         h = as_float_array([self.h] * n if np.ndim(self.h) == 0 else self.h, "h", (n,))
-        if (h <= 0).any():
-            raise ValueError(f"h: bandwidths must be > 0, got {h[h <= 0][0]!r}")
+        if (h < MIN_H).any():
+            raise ValueError(
+                f"h: bandwidths must be >= {MIN_H:g} m (1/h² must not overflow), got "
+                f"{h[h < MIN_H][0]!r}"
+            )
         if self.ids is None:
             ids = np.arange(n, dtype=np.int64)
         else:
@@ -192,6 +209,10 @@ def saliency_grid(
     r = _rays(rays)
     lo_a = as_float_array(lo, "lo", (3,))
     hi_a = as_float_array(hi, "hi", (3,))
+    with np.errstate(over="ignore"):
+        span = hi_a - lo_a
+    if not np.isfinite(span).all():
+        raise ValueError(f"lo, hi: the box's size overflows float64 ({lo_a} to {hi_a})")
     sh = _grid_shape(shape)
     return _core.saliency_grid(  # type: ignore[no-any-return]
         r.p, r.v, r.h, tuple(lo_a.tolist()), tuple(hi_a.tolist()), sh
@@ -629,9 +650,23 @@ def track_charges(
         for t, cs in enumerate(per_frame)
         for c in check_sequence(cs, f"charges_per_frame[{t}]")
     ]
+    seen: dict[int, int] = {}
     for t, c in flat:
         if not isinstance(c, Charge):
             raise ValueError(f"charges_per_frame[{t}]: expected Charge objects, got {c!r}")
+        i = seen[t] = seen.get(t, -1) + 1
+        name = f"charges_per_frame[{t}][{i}]"
+        ids, m = np.asarray(c.ids), np.asarray(c.membership)
+        if ids.ndim != 1 or not np.issubdtype(ids.dtype, np.integer):
+            raise ValueError(f"{name}.ids: expected (N,) integer person ids, got {ids.shape}")
+        if m.shape != ids.shape:
+            raise ValueError(
+                f"{name}.membership: expected one value per id {ids.shape}, got {m.shape}"
+            )
+        if not np.isfinite(m).all():
+            raise ValueError(f"{name}.membership: contains NaN or infinite values")
+        if len(np.unique(ids)) != len(ids):
+            raise ValueError(f"{name}.ids: a person appears twice")
     if not flat:
         return []
     people = np.unique(np.concatenate([c.ids for _, c in flat]))

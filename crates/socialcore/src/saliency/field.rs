@@ -48,8 +48,15 @@ pub fn saliency(rays: &GazeRays, x: &Vector3<f64>) -> f64 {
             }
             continue;
         }
-        let s2 = s * s;
-        let pp_h = (w.norm_squared() - s2).max(0.0) * rays.inv_h2[i];
+        let (mut s2, mut w2) = (s * s, w.norm_squared());
+        if !(s2.is_finite() && w2.is_finite()) {
+            // A point beyond 1e154 m: the ratio below depends only on the direction of
+            // `w`, so scale it down instead of comparing infinities (which read as 0).
+            let k = 1.0 / w.amax();
+            s2 = (s * k) * (s * k);
+            w2 = (w * k).norm_squared();
+        }
+        let pp_h = (w2 - s2).max(0.0) * rays.inv_h2[i];
         if pp_h > Q_CUTOFF * s2 {
             continue;
         }
@@ -222,6 +229,15 @@ mod tests {
             0.5 * (ray_density(&r, 0, &x) + ray_density(&r, 1, &x)),
             max_relative = 1e-12
         );
+        // A cone: a point 1e200 m out along a direction scores as one 10 m out along it
+        // (the squares used to overflow and the far point scored the peak).
+        let d = (v + e * 0.1).normalize();
+        let (near, far) = (
+            saliency(&r, &(p + d * 10.0)),
+            saliency(&r, &(p + d * 1e200)),
+        );
+        assert!(near > 0.0);
+        assert_relative_eq!(far, near, max_relative = 1e-3);
     }
 
     #[test]
