@@ -8,7 +8,13 @@ import pytest
 
 import socialcam
 from socialcam import synth
-from socialcam.gazefield import GazeField, cross_validate_gaze, detect_anomalies, fuse_gaze
+from socialcam.gazefield import (
+    GazeField,
+    cross_validate_gaze,
+    detect_anomalies,
+    fuse_gaze,
+    rbf_predict,
+)
 from socialcam.synth.mafia import mafia
 from socialcam.synth.people import primary_from_true
 
@@ -222,6 +228,21 @@ def test_bad_input_is_refused_with_defined_behaviour():
     # Diverging rays: nothing to start from.
     with pytest.raises(socialcam.DegenerateError):
         GazeField.fit([(p, -v)], n_charges=1)
+    # fuse_gaze: a partly NaN prediction was read with 0 for the NaN; concentrations of
+    # 1e200 overflowed to a zero direction and κ = inf
+    up = np.array([[0.0, 0.0, 1.0]])
+    with pytest.raises(ValueError, match="predicted: row 0 is partly NaN"):
+        socialcam.fuse_gaze(up, 1.0, [[0.6, np.nan, 0.8]], 100.0)
+    with pytest.raises(ValueError, match="concentrations above 1e"):
+        socialcam.fuse_gaze(up, 1e200, up, 1e200)
+    # rbf: two members at one eye position was scipy's LinAlgError
+    twin = p.copy()
+    twin[1] = twin[0]
+    with pytest.raises(socialcam.DegenerateError, match=r"frames\[0\]: two members share"):
+        rbf_predict([(twin, v)], twin[:1] + 0.1, [0])
+    d, k = socialcam.fuse_gaze(up, 1e150, up, 1e150)
+    np.testing.assert_allclose(d, up)
+    assert k[0] == pytest.approx(2e150)
 
 
 def test_plot_draws_arrows_and_charges():

@@ -43,7 +43,7 @@ from socialcam._validate import (
     check_seed,
     readonly,
 )
-from socialcam.errors import ConvergenceError
+from socialcam.errors import ConvergenceError, DegenerateError
 
 IntArray = npt.NDArray[np.int64]
 
@@ -749,9 +749,23 @@ def rbf_predict(
         if b - a == 1:
             out[rows] = flat.v[a]
             continue
-        interp = RBFInterpolator(
-            flat.p[a:b], flat.v[a:b], kernel=kernel, smoothing=smoothing, degree=0
-        )
+        try:
+            interp = RBFInterpolator(
+                flat.p[a:b], flat.v[a:b], kernel=kernel, smoothing=smoothing, degree=0
+            )
+        except np.linalg.LinAlgError:
+            _, first, count = np.unique(flat.p[a:b], axis=0, return_index=True, return_counts=True)
+            if (count > 1).any():
+                i = int(first[np.argmax(count > 1)])
+                raise DegenerateError(
+                    f"frames[{f}]: two members share the eye position of member {i}; the "
+                    "radial-basis regression cannot interpolate two directions at one point "
+                    "(give smoothing > 0)"
+                ) from None
+            raise DegenerateError(
+                f"frames[{f}]: the members' eye positions make the radial-basis system "
+                "singular (give smoothing > 0)"
+            ) from None
         d = interp(pts[rows])
         n = np.linalg.norm(d, axis=1, keepdims=True)
         out[rows] = np.where(n > 0, d / np.where(n > 0, n, 1.0), np.nan)
@@ -933,6 +947,12 @@ def detect_anomalies(
     )
 
 
+#: largest concentration :func:`fuse_gaze` takes: κ is about 1/σ² for an angular spread σ,
+#: so 1e150 is σ of 1e-75 rad; the norm of the weighted sum of two directions (its squares)
+#: overflows beyond it
+MAX_KAPPA = 1e150
+
+
 def fuse_gaze(
     measured: npt.ArrayLike,
     kappa_measured: float | npt.ArrayLike,
@@ -961,6 +981,17 @@ def fuse_gaze(
     kb = _per_row(as_float_array(kappa_field, "kappa_field", allow_nan=True), "kappa_field", len(a))
     if (ka <= 0).any() or (np.nan_to_num(kb, nan=1.0) <= 0).any():
         raise ValueError("kappa_measured, kappa_field: concentrations must be > 0")
+    if (ka > MAX_KAPPA).any() or (np.nan_to_num(kb, nan=1.0) > MAX_KAPPA).any():
+        raise ValueError(
+            f"kappa_measured, kappa_field: concentrations above {MAX_KAPPA:g} (a spread far "
+            "below float64's angular resolution) overflow the fusion"
+        )
+    partial = np.isnan(b).any(axis=1) & ~np.isnan(b).all(axis=1)
+    if partial.any():
+        raise ValueError(
+            f"predicted: row {int(np.flatnonzero(partial)[0])} is partly NaN (a row is a "
+            "direction or all NaN)"
+        )
     for name, arr in (("measured", a), ("predicted", b)):
         n = np.linalg.norm(arr, axis=1)
         bad = np.abs(n - 1.0) > UNIT_TOLERANCE
