@@ -148,6 +148,24 @@ def test_align_similarity_errors():
         sc.align_similarity(np.full((3, 3), np.nan), np.eye(3))
 
 
+def test_align_similarity_at_any_size_and_far_from_the_origin():
+    # points of 1e200 m gave NaN scale, R and t; of 1e-200 m "coincident"; 1e6 m off the
+    # origin (UTM) keeps the answer, 1e15 m (0.2 m of rounding) is refused by name
+    rng = np.random.default_rng(0)
+    src = rng.normal(size=(6, 3))
+    dst = 2 * src + [1.0, 2.0, 3.0]
+    for k in (1e200, 1e-200, 1.0):
+        s, R, t = sc.align_similarity(src * k, dst * k)
+        assert s == pytest.approx(2.0, rel=1e-9)
+        np.testing.assert_allclose(R, np.eye(3), atol=1e-9)
+        np.testing.assert_allclose(t / k, [1.0, 2.0, 3.0], atol=1e-9)
+    s, R, t = sc.align_similarity(src + 6.4e6, dst + 6.4e6)
+    assert s == pytest.approx(2.0, rel=1e-8)
+    np.testing.assert_allclose(t, [1.0, 2.0, 3.0] - np.full(3, 6.4e6), rtol=1e-9)
+    with pytest.raises(ValueError, match=r"src: .*float64 rounds"):
+        sc.align_similarity(src + 1e15, dst + 1e15)
+
+
 def test_ray_sphere_both_roots():
     o = np.array([[3.0, 1.0, -2.0], [0.0, 2.0, -5.0]])
     d = np.array([[-1.0, -0.2, 0.6], [0.0, 0.0, 1.0]])

@@ -209,11 +209,35 @@ def align_similarity(
     ------
     DegenerateError
         Fewer than 3 points, or collinear/coincident points.
+    ValueError
+        Points so far from the origin that float64 rounds them by more than a thousandth of
+        their spread.
     """
     a = as_float_array(src, "src", (None, 3))
     b = as_float_array(dst, "dst", (None, 3))
-    s, R, t = _core.align_similarity(a, b)
-    return float(s), R, t
+    # Solved on centred points of unit RMS spread, then mapped back: points of 1e200 m
+    # overflowed (scale, R, t all NaN), of 1e-200 m underflowed to "coincident", and a
+    # scene far from the origin lost its spread in the rounding.
+    ma, sa = _centre_spread(a, "src")
+    mb, sb = _centre_spread(b, "dst")
+    s_n, R, t_n = _core.align_similarity((a - ma) / sa, (b - mb) / sb)
+    scale = float(s_n) * sb / sa
+    t = mb + sb * np.asarray(t_n) - scale * (np.asarray(R) @ ma)
+    return scale, R, t
+
+
+def _centre_spread(x: FloatArray, name: str) -> tuple[FloatArray, float]:
+    """Centroid and RMS distance from it of ``(N, 3)`` points (1.0 when they coincide, for
+    the core to name), computed without overflow; refuses points float64 rounds by more
+    than a thousandth of their spread."""
+    m = x.mean(axis=0) if len(x) else np.zeros(3)
+    d = x - m
+    big = float(np.abs(d).max(initial=0.0))
+    if big == 0.0:
+        return m, 1.0
+    spread = big * float(np.sqrt(np.mean(np.sum((d / big) ** 2, axis=1))))
+    check_rounding(x, spread, name, "the points' spread")
+    return m, spread
 
 
 def ray_sphere(
