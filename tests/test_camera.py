@@ -220,3 +220,21 @@ def test_indexing_takes_integers_slices_and_masks_only():
     for bad in (None, True, np.True_, np.array([[0, 1]]), [0.5], [n], "a", np.ones(n + 1, bool)):
         with pytest.raises(IndexError, match="camera index"):
             cams[bad]
+
+
+def test_moved_and_scaled_refuse_overflow_and_keep_rotations():
+    cams = _rig()
+    with pytest.raises(ValueError, match="s: centres times 1e"):
+        cams.scaled(1e200).scaled(1e200)
+    with pytest.raises(ValueError, match="t: the moved camera centres overflow"):
+        cams.moved(np.eye(3), [1e308, 0.0, 0.0]).moved(np.eye(3), [1e308, 0.0, 0.0])
+    # a rotation 1e-7 off orthonormal, applied 2000 times: snapped each time, so the
+    # result is still a rotation the constructor takes (det R drifted to 1.005 before)
+    a = 1e-3
+    turn = np.array([[np.cos(a), -np.sin(a), 0], [np.sin(a), np.cos(a), 0], [0, 0, 1.0]])
+    turn = turn * (1 + 1e-7)
+    out = cams
+    for _ in range(2000):
+        out = out.moved(turn, np.zeros(3))
+    assert np.abs(np.linalg.det(out.R) - 1).max() < 1e-9
+    sc.Cameras(out.K, out.R, out.C)

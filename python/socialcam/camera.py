@@ -168,9 +168,17 @@ class Cameras:
         t_ = as_float_array(t, "t", (3,))
         if not np.allclose(R_ @ R_.T, np.eye(3), atol=1e-6) or np.linalg.det(R_) < 0:
             raise ValueError("R: expected a rotation matrix (orthonormal, det +1)")
+        # the nearest rotation: moves within the tolerance above would otherwise pile up
+        # (2000 of them left det R = 1.005, which the constructor refuses)
+        u, _, vt = np.linalg.svd(R_)
+        R_ = u @ vt
         out = self[:]
         out._R = readonly(np.ascontiguousarray(self._R @ R_.T))
-        out._C = readonly(np.ascontiguousarray(self._C @ R_.T + t_))
+        with np.errstate(over="ignore", invalid="ignore"):
+            C = self._C @ R_.T + t_
+        if not np.isfinite(C).all():
+            raise ValueError("t: the moved camera centres overflow float64")
+        out._C = readonly(np.ascontiguousarray(C))
         return out
 
     def scaled(self, s: float) -> Cameras:
@@ -182,8 +190,12 @@ class Cameras:
         s_ = check_float(s, "s")
         if not s_ > 0:
             raise ValueError(f"s: must be > 0, got {s}")
+        with np.errstate(over="ignore"):
+            C = self._C * s_
+        if not np.isfinite(C).all():
+            raise ValueError(f"s: centres times {s_:g} overflow float64")
         out = self[:]
-        out._C = readonly(np.ascontiguousarray(self._C * s_))
+        out._C = readonly(np.ascontiguousarray(C))
         return out
 
     # ----------------------------------------------------------------- geometry
