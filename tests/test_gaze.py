@@ -123,3 +123,10 @@ def test_bad_input():
             sc.calibrate_gaze(seg.cameras, **kw)
     with pytest.raises(ValueError, match="h"):
         sc.GazeCalibration.optical_axis(h=0.0)
+    # a stored record that is not one (was a KeyError)
+    cal = sc.GazeCalibration.optical_axis()
+    assert sc.GazeCalibration.from_dict(cal.to_dict()).calibrated == cal.calibrated
+    with pytest.raises(ValueError, match="d: not a GazeCalibration record, missing"):
+        sc.GazeCalibration.from_dict({})
+    with pytest.raises(ValueError, match="d: expected a dict"):
+        sc.GazeCalibration.from_dict([])  # type: ignore[arg-type]

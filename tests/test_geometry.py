@@ -208,3 +208,13 @@ def test_triangulate_bad_input(x, msg):
 def test_triangulate_needs_cameras():
     with pytest.raises(ValueError, match="cameras"):
         sc.triangulate(np.zeros((4, 2)), np.zeros((4, 3, 4)))  # type: ignore[arg-type]
+
+
+def test_ray_sphere_directions_of_any_length():
+    # the roots scale with 1/|v|; |v| of 1e200 gave NaN roots reported as a hit (miss 0)
+    for k in (1e200, 2.0, 1e-170):
+        s, miss = sc.ray_sphere([[0.0, 0, 0]], [[0.0, 0, k]], [[0.0, 0, 5]], 1.0)
+        np.testing.assert_allclose(s * k, [[6.0, 4.0]], rtol=1e-12)
+        assert miss[0] == 0.0
+    with pytest.raises(ValueError, match="overflow"):
+        sc.ray_sphere([[0.0, 0, 0]], [[0.0, 0, 1]], [[0.0, 0, 0]], 1e200)

@@ -106,6 +106,11 @@ class GazeCalibration:
     @classmethod
     def from_dict(cls, d: dict[str, Any]) -> GazeCalibration:
         """The inverse of :meth:`to_dict` (``None`` entries of arrays read as NaN)."""
+        if not isinstance(d, dict):
+            raise ValueError(f"d: expected a dict from to_dict(), got {type(d).__name__}")
+        missing = [k for k in cls.__dataclass_fields__ if k not in d]
+        if missing:
+            raise ValueError(f"d: not a GazeCalibration record, missing {missing}")
         kw: dict[str, Any] = {}
         for k in cls.__dataclass_fields__:
             val = d[k]

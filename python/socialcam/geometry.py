@@ -268,7 +268,17 @@ def ray_sphere(
     if r_.ndim > 1 or (r_.ndim == 1 and r_.shape[0] not in (1, n)):
         raise ValueError(f"radii: expected a number or shape ({n},), got {r_.shape}")
     r = np.broadcast_to(r_, (n,)).copy()
-    return _core.ray_sphere(o, d, c, r)
+    # The roots scale with 1/|v|: solved with each direction divided by its largest
+    # component, then divided back (|v| of 1e200 or 1e-170 overflowed in the squares)
+    big = np.abs(d).max(axis=1) if n else np.ones(0)
+    big = np.where(big > 0, big, 1.0)
+    s, miss = _core.ray_sphere(o, d / big[:, None], c, r)
+    if not (np.isfinite(s) | np.isnan(s)).all() or not np.isfinite(miss).all():
+        raise ValueError(
+            "origins, centres, radii: the intersections overflow float64 (positions or radii "
+            "beyond 1e150)"
+        )
+    return s / big[:, None], miss
 
 
 def perspective_distance(p: npt.ArrayLike, v: npt.ArrayLike, x: npt.ArrayLike) -> FloatArray:
