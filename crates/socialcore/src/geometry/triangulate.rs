@@ -351,13 +351,23 @@ mod tests {
             triangulate_point(&same, &px, true, &LmOptions::default()),
             Err(Error::Degenerate(_))
         ));
-        // One centre, turned heads: the rays differ in direction but meet only at the
+        // One centre, turned heads (a camera that only rotates), noisy pixels: the rays
+        // differ in direction by more than the parallel test allows but meet only at the
         // centre, which the linear solution used to return as the point.
         let turned: Vec<Camera> = cams
             .iter()
             .map(|c| Camera::new(c.k, c.r, cams[0].c, 0).unwrap())
             .collect();
-        let px: Vec<_> = turned.iter().map(|c| Some(c.project(&x).0)).collect();
+        let noise = [
+            Vector2::new(0.5, -0.3),
+            Vector2::new(-0.4, 0.6),
+            Vector2::new(0.2, 0.7),
+        ];
+        let px: Vec<_> = turned
+            .iter()
+            .zip(noise)
+            .map(|(c, e)| Some(c.project(&x).0 + e))
+            .collect();
         match triangulate_point(&turned, &px, true, &LmOptions::default()) {
             Err(Error::Degenerate(m)) => assert!(m.contains("one camera centre"), "{m}"),
             other => panic!("expected Degenerate, got {other:?}"),
