@@ -48,12 +48,15 @@ def as_float_array(
 ROUNDING_SHARE = 1e-3
 
 
-def check_rounding(coords: np.ndarray, extent: float, name: str, what: str) -> None:
-    """Refuses coordinates so far from the origin that float64 rounds them (``eps`` times
-    their size) by more than ``ROUNDING_SHARE`` of ``extent`` metres, the size that matters
-    to the geometry (``what``: "the bone", "their spread"); a zero extent passes (the
-    caller's degeneracy checks name it). Translation is otherwise harmless: a scene at
-    1e6 m (UTM, ECEF) keeps its answers."""
+def check_rounding(coords: np.ndarray, name: str, what: str, extent: float | None = None) -> None:
+    """Refuses ``(N, 3)`` coordinates so far from the origin that float64 rounds them
+    (``eps`` times their size) by more than ``ROUNDING_SHARE`` of ``extent`` metres, the
+    size that matters to the geometry (``what``: "the bone", "the eyes' spread"; by default
+    the coordinates' own largest range along an axis); a zero extent passes (the caller's
+    degeneracy checks name it). Translation is otherwise harmless: a scene at 1e6 m (UTM,
+    ECEF) keeps its answers."""
+    if extent is None:
+        extent = float(np.ptp(coords, axis=0).max()) if len(coords) else 0.0
     reach = float(np.abs(coords).max(initial=0.0))
     rounding = reach * float(np.finfo(np.float64).eps)
     if extent > 0 and rounding > ROUNDING_SHARE * extent:

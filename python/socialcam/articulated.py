@@ -283,7 +283,7 @@ def _check_scale(parent: FloatArray, cameras: Cameras, length: float, name: str)
     the parent are then lost in the rounding (a scene shifted by 1e15 m for a 0.3 m bone
     gave 35 px of reprojection error and no error message)."""
     both = np.concatenate([parent.reshape(-1, 3), cameras.C.reshape(-1, 3)])
-    check_rounding(both, length, f"{name}, cameras", "the bone (is its length in metres?)")
+    check_rounding(both, f"{name}, cameras", "the bone (is its length in metres?)", length)
 
 
 def _times(cameras: Cameras) -> FloatArray:

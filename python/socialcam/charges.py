@@ -134,8 +134,7 @@ def _rays(rays: GazeRays | tuple[Any, ...], name: str = "rays") -> GazeRays:
             )
         rays = GazeRays(*rays)
     # eyes 1e15 m from the origin are rounded by 0.1 m: charges moved by that, or lost
-    spread = float(np.ptp(rays.p, axis=0).max()) if len(rays.p) else 0.0
-    check_rounding(rays.p, spread, f"{name}.p", "the eyes' spread")
+    check_rounding(rays.p, f"{name}.p", "the eyes' spread")
     return rays
 
 

@@ -166,8 +166,7 @@ def calibrate_gaze(
     tol = check_float(tol, "tol", min=0.0)
     # solved about the centres' mean (the fixation point y moves back): far from the
     # origin (1e6 m) the head's centimetres of motion were lost and the start returned
-    spread = float(np.ptp(cameras.C, axis=0).max()) if len(cameras) else 0.0
-    check_rounding(cameras.C, spread, "cameras.C", "the head's motion")
+    check_rounding(cameras.C, "cameras.C", "the head's motion")
     origin = cameras.C.mean(axis=0) if len(cameras) else np.zeros(3)
     d = _core.calibrate_gaze(
         cameras.R, np.ascontiguousarray(cameras.C - origin), lambda_c, lambda_axis, max_iter, tol

@@ -228,8 +228,7 @@ def _flatten(frames: Sequence[object], default_h: float = 0.1) -> _Flat:
         counts.append(n)
     off = np.concatenate([[0], np.cumsum(counts)]).astype(np.int64)
     eyes = np.concatenate(ps).reshape(-1, 3)
-    spread = float(np.ptp(eyes, axis=0).max()) if len(eyes) else 0.0
-    check_rounding(eyes, spread, "frames[*].p", "the eyes' spread")
+    check_rounding(eyes, "frames[*].p", "the eyes' spread")
     return _Flat(
         eyes,
         np.concatenate(vs).reshape(-1, 3),

@@ -134,9 +134,7 @@ def triangulate(
         raise ValueError(
             f"x: expected shape ({v}, 2) or (N, {v}, 2) for {v} cameras, got {np.shape(x)}"
         )
-    if v:
-        spread = float(np.ptp(cameras.C, axis=0).max())
-        check_rounding(cameras.C, spread, "cameras.C", "the cameras' spread")
+    check_rounding(cameras.C, "cameras.C", "the cameras' spread")
     X, rms, rms0, views, conv, why = _core.triangulate(
         cameras.K, cameras.R, cameras.C, x_, bool(refine), n_iter
     )
@@ -236,7 +234,7 @@ def _centre_spread(x: FloatArray, name: str) -> tuple[FloatArray, float]:
     if big == 0.0:
         return m, 1.0
     spread = big * float(np.sqrt(np.mean(np.sum((d / big) ** 2, axis=1))))
-    check_rounding(x, spread, name, "the points' spread")
+    check_rounding(x, name, "the points' spread", spread)
     return m, spread
 
 
