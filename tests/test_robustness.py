@@ -446,3 +446,86 @@ def test_a_scene_far_from_the_origin_keeps_its_answer_or_is_refused():
     assert np.abs(f1.charges[0] - 6.4e6 - f0.charges[0]).max() < 1e-6
     with pytest.raises(ValueError, match=r"frames\[\*\]\.p: .*float64 rounds"):
         sc.GazeField.fit([(eyes + 1e15, v)], n_charges=1, kappa=20.0)
+
+
+# ------------------------------------------------------- values that used to pass silently
+
+
+@pytest.mark.parametrize(
+    ("bad", "words"),
+    [([True, False], "booleans"), (np.array([1 + 2j, 0j]), "complex"), (["1.5", "2"], "text")],
+)
+def test_arrays_of_bools_complex_or_text_are_refused(bad, words):
+    # converted before: True → 1.0, the imaginary part dropped, "1.5" → 1.5
+    with pytest.raises(ValueError, match=rf"^times: cannot be converted .*{words}"):
+        sc.dct_basis(bad, 1)
+    assert sc.dct_basis(np.array([0, 1], np.uint8), 1).shape == (2, 1)  # integers still read
+
+
+def test_gaze_rays_ids_beyond_int64_are_refused_not_wrapped():
+    p, v = gaze_frames(1)[0]
+    ids = np.arange(6, dtype=np.uint64)
+    ids[0] = 2**63  # wrapped to -2**63 before
+    with pytest.raises(ValueError, match=r"^ids: values must fit in int64"):
+        sc.GazeRays(p, v, 0.1, ids)
+    ok = sc.GazeRays(p, v, 0.1, np.arange(6, dtype=np.uint64) + 10)
+    assert ok.ids.dtype == np.int64 and ok.ids.tolist() == list(range(10, 16))
+
+
+def test_dct_basis_refuses_a_span_that_overflows():
+    with pytest.raises(ValueError, match=r"^times: the span .* overflows"):
+        sc.dct_basis([-1e308, 1e308], 2)
+    with pytest.raises(ValueError, match=r"^times, t0, t1: the span .* overflows"):
+        sc.dct_basis([0.0, 1.0], 2, t0=-1e308, t1=1e308)
+
+
+def test_back_projection_of_huge_pixels_stays_unit():
+    cams = ring(2)
+    x = np.array([[3e200, -1e200], [1e300, 1e300]])
+    d = cams.back_project(x)  # the norm's squares overflowed: NaN or zero before
+    np.testing.assert_allclose(np.linalg.norm(d, axis=1), 1.0)
+    # the direction is that of the pixel seen from far away: same as a scaled-down pixel
+    far = cams.back_project(x / 1e180)  # 1e20 px: the principal point is lost in rounding
+    np.testing.assert_allclose(d, far, atol=1e-12)
+
+
+@pytest.mark.parametrize("flag", ["no", 1, None])
+def test_flags_must_be_bools(flag):
+    cams = ring(12)
+    x = cams.project(np.zeros(3))
+    calls: list[tuple[str, Callable[[], object]]] = [
+        ("strict", lambda: sc.triangulate(x, cams, strict=flag)),
+        ("return_info", lambda: sc.triangulate(x, cams, return_info=flag)),
+        ("strict", lambda: sc.reconstruct_trajectory(x, cams, strict=flag)),
+        ("strict", lambda: sc.reconstruct_trajectories(x[None], cams, strict=flag)),
+        ("return_depth", lambda: cams.project(np.zeros(3), return_depth=flag)),
+        ("strict", lambda: sc.GazeField.fit(gaze_frames(2), n_charges=1, strict=flag)),
+    ]
+    for name, call in calls:
+        with pytest.raises(ValueError, match=rf"^{name}: expected a bool"):
+            call()
+    traj = sc.reconstruct_trajectory(x, cams)
+    with pytest.raises(ValueError, match=r"^extrapolate: expected a bool"):
+        traj.at([0.5], extrapolate=flag)
+
+
+def test_calibration_refuses_a_stalling_prior_and_a_head_that_did_not_move():
+    from socialcam.gaze import MAX_LAMBDA_AXIS, MIN_HEAD_MOTION
+    from socialcam.synth.calibration import fixation_segment
+
+    head = fixation_segment(60, seed=0).cameras
+    # 1e300 returned the start (p = 0, v = z) marked converged
+    with pytest.raises(ValueError, match=r"^lambda_axis: "):
+        sc.calibrate_gaze(head, lambda_axis=1e300)
+    assert sc.calibrate_gaze(head, lambda_axis=MAX_LAMBDA_AXIS).converged
+    # a head that moved micrometres returned the start
+    tiny = head.scaled(0.5 * MIN_HEAD_MOTION / np.ptp(head.C, axis=0).max())
+    with pytest.raises(sc.DegenerateError, match=r"^cameras\.C: the head moved"):
+        sc.calibrate_gaze(tiny)
+
+
+def test_cross_validation_needs_three_members():
+    frames = gaze_frames(3, n_people=2)
+    # said "leave_out: expected 1 <= k <= 0" before
+    with pytest.raises(ValueError, match=r"^frames: cross-validation needs rays of at least 3"):
+        sc.cross_validate_gaze(frames, n_charges=1)

@@ -12,6 +12,28 @@ import numpy.typing as npt
 FloatArray = npt.NDArray[np.float64]
 
 
+#: dtype kinds read as real numbers (integers, floats; ``O`` is checked on conversion)
+_NUMERIC_KINDS = "iufO"
+
+
+def _dtype_words(dtype: np.dtype[Any]) -> str:
+    kind = {"b": "booleans", "c": "complex numbers", "U": "text", "S": "bytes"}
+    return kind.get(dtype.kind, f"{dtype} values")
+
+
+def as_int_array(value: object, name: str) -> npt.NDArray[np.int64]:
+    """An int64 array from integer dtypes only: ``[1, 0.5]`` and booleans are refused, not
+    truncated or read as 0/1, and unsigned values beyond int64 are refused, not wrapped."""
+    a = np.asarray(value)
+    if a.size == 0:
+        return a.astype(np.int64)
+    if not np.issubdtype(a.dtype, np.integer):
+        raise ValueError(f"{name}: expected integers, got {_dtype_words(a.dtype)}")
+    if np.issubdtype(a.dtype, np.unsignedinteger) and int(a.max()) > _I64_MAX:
+        raise ValueError(f"{name}: values must fit in int64 (largest {_I64_MAX})")
+    return a.astype(np.int64)
+
+
 def as_float_array(
     value: object,
     name: str,
@@ -25,7 +47,12 @@ def as_float_array(
     NaN only when ``allow_nan`` is false.
     """
     try:
-        arr = np.ascontiguousarray(value, dtype=np.float64)
+        raw = value if isinstance(value, np.ndarray) else np.asarray(value)
+        # bool, complex and text would convert (True → 1, the imaginary part dropped,
+        # "1.5" → 1.5), each almost surely a caller's mistake
+        if raw.dtype.kind not in _NUMERIC_KINDS and raw.size:
+            raise ValueError(f"expected real numbers, got {_dtype_words(raw.dtype)}")
+        arr = np.ascontiguousarray(raw, dtype=np.float64)
     except (TypeError, ValueError) as exc:
         raise ValueError(f"{name}: cannot be converted to a float64 array ({exc})") from None
     if shape is not None:

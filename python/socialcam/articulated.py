@@ -22,6 +22,7 @@ from socialcam import _core
 from socialcam._validate import (
     FloatArray,
     as_float_array,
+    check_bool,
     check_choice,
     check_float,
     check_int,
@@ -1042,6 +1043,7 @@ def learn_angle_ranges(
     )
     parents_ = [int(p) for p in parents]
     J = len(parents_)
+    bend, siblings = check_bool(bend, "bend"), check_bool(siblings, "siblings")
     clips = [as_float_array(c, "positions", (None, J, 3), allow_nan=True) for c in clips]
     for c, p in enumerate(parents_):
         if p < -1 or p >= J or p == c:

@@ -11,7 +11,7 @@ import numpy as np
 import numpy.typing as npt
 
 from socialcam import _core
-from socialcam._validate import FloatArray, as_float_array, check_size, readonly
+from socialcam._validate import FloatArray, as_float_array, check_bool, check_size, readonly
 
 #: COLMAP puts pixel (0, 0) at the corner of the top-left pixel, OpenCV at its centre.
 COLMAP_TO_OPENCV_PIXEL = -0.5
@@ -216,6 +216,7 @@ class Cameras:
         pixels : ndarray, shape (F, 2) or (F, N, 2)
         depth : ndarray, shape (F,) or (F, N), only with ``return_depth``
         """
+        return_depth = check_bool(return_depth, "return_depth")
         X_ = as_float_array(points, "points")
         single = X_.ndim == 1
         if single:

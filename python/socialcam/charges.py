@@ -26,6 +26,7 @@ from socialcam._validate import (
     FloatArray,
     apply_overrides,
     as_float_array,
+    as_int_array,
     check_choice,
     check_float,
     check_int,
@@ -112,7 +113,7 @@ class GazeRays:
                 raise ValueError(
                     f"ids: expected {n} integer ids, got {ids_in.shape} {ids_in.dtype}"
                 )
-            ids = ids_in.astype(np.int64)
+            ids = as_int_array(ids_in, "ids")  # uint64 beyond int64 refused, not wrapped
             if len(np.unique(ids)) != n:
                 raise ValueError("ids: person ids must be distinct within a frame")
         for name, arr in (("p", p), ("v", v), ("h", h), ("ids", ids)):

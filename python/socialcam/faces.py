@@ -1605,6 +1605,7 @@ def reconstruct_faces(
     from socialcam._validate import apply_overrides
     from socialcam.errors import DegenerateError
 
+    anchors = check_bool(anchors, "anchors")
     o = apply_overrides(options, FaceOptions, overrides)
     V = _check_views(detections, cameras)
     times, frames = _instants(cameras, o.sync_tolerance)
@@ -2686,6 +2687,7 @@ def scale_from_faces(
     from socialcam.errors import DegenerateError
 
     io_ = check_float(interocular, "interocular", min=1e-3, max=1.0)
+    anchors = check_bool(anchors, "anchors")
     check_int(min_instants, "min_instants", min=1)
     o = apply_overrides(options, FaceOptions, overrides)
     _check_views(detections, cameras)

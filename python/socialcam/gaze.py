@@ -25,12 +25,23 @@ import numpy as np
 from socialcam import _core
 from socialcam._validate import FloatArray, check_float, check_int, check_rounding, readonly
 from socialcam.camera import Cameras
+from socialcam.errors import DegenerateError
 
 __all__ = ["DEFAULT_H", "GazeCalibration", "calibrate_gaze"]
 
 #: Eye-in-head spread assumed without a calibration segment (≈ 3°; Sec 3.1 reports the
 #: eye orientation deviating "by a small degree" from the head while fixating).
 DEFAULT_H = 0.05
+
+#: Largest ``lambda_axis`` (1/m² per frame; a prior of σ = 1 mm on the eye's position along
+#: its ray). Stronger priors stiffen the solve until Levenberg–Marquardt stalls (1e7: the
+#: iteration cap; 1e300: no step at all, the start returned as converged).
+MAX_LAMBDA_AXIS = 1e6
+
+#: Least head motion (m, the centres' largest range along an axis) a calibration segment
+#: needs. The eye's offset is seen only through the head's motion, which the thesis takes
+#: side to side and back and forth by decimetres; at a micrometre the start came back.
+MIN_HEAD_MOTION = 1e-3
 
 
 @dataclass(frozen=True)
@@ -146,7 +157,7 @@ def calibrate_gaze(
         wearer fixates one still point and moves the head side to side and back and forth.
     lambda_c : λ_c of Eq 3.1, weight of ``‖p‖²`` per frame (1/m²).
     lambda_axis : weight per frame of ``(p · v)²``, which fixes the unobservable position of
-        the eye along its own ray (module docs).
+        the eye along its own ray (module docs); at most ``MAX_LAMBDA_AXIS``.
     max_iter, tol : Levenberg–Marquardt cap and relative cost tolerance.
 
     Raises
@@ -155,18 +166,24 @@ def calibrate_gaze(
         Fewer than 5 frames, non-finite poses, bad options; centres so far from the origin
         that float64 rounds them by more than a thousandth of the head's motion.
     socialcam.DegenerateError
-        The head did not move (parallel optical axes) or the axes do not converge in front of
-        the cameras.
+        The head did not move (parallel optical axes, or centres within ``MIN_HEAD_MOTION``)
+        or the axes do not converge in front of the cameras.
     """
     if not isinstance(cameras, Cameras):
         raise ValueError(f"cameras: expected a socialcam.Cameras, got {type(cameras).__name__}")
     lambda_c = check_float(lambda_c, "lambda_c", min=0.0)
-    lambda_axis = check_float(lambda_axis, "lambda_axis", min=0.0)
+    lambda_axis = check_float(lambda_axis, "lambda_axis", min=0.0, max=MAX_LAMBDA_AXIS)
     max_iter = check_int(max_iter, "max_iter", min=1, max=1_000_000)
     tol = check_float(tol, "tol", min=0.0)
     # solved about the centres' mean (the fixation point y moves back): far from the
     # origin (1e6 m) the head's centimetres of motion were lost and the start returned
     check_rounding(cameras.C, "cameras.C", "the head's motion")
+    moved = float(np.ptp(cameras.C, axis=0).max()) if len(cameras) else 0.0
+    if len(cameras) >= 5 and moved < MIN_HEAD_MOTION:
+        raise DegenerateError(
+            f"cameras.C: the head moved {moved:.3g} m; calibration needs it to move side to "
+            f"side and back and forth (at least {MIN_HEAD_MOTION:g} m, decimetres at best)"
+        )
     origin = cameras.C.mean(axis=0) if len(cameras) else np.zeros(3)
     d = _core.calibrate_gaze(
         cameras.R, np.ascontiguousarray(cameras.C - origin), lambda_c, lambda_axis, max_iter, tol

@@ -36,6 +36,8 @@ from socialcam._validate import (
     FloatArray,
     apply_overrides,
     as_float_array,
+    as_int_array,
+    check_bool,
     check_choice,
     check_float,
     check_int,
@@ -240,14 +242,7 @@ def _flatten(frames: Sequence[object], default_h: float = 0.1) -> _Flat:
 
 def _int_array(value: object, name: str) -> IntArray:
     """An integer array: integer dtypes only (``[1, 0.5]`` is refused, not truncated)."""
-    a = np.asarray(value)
-    if a.size == 0:
-        return a.astype(np.int64)
-    if not np.issubdtype(a.dtype, np.integer) or a.dtype == np.bool_:
-        raise ValueError(f"{name}: expected integers, got {a.dtype} values")
-    if np.issubdtype(a.dtype, np.unsignedinteger) and int(a.max()) > _I64_MAX:
-        raise ValueError(f"{name}: values must fit in int64")
-    return a.astype(np.int64)
+    return as_int_array(value, name)
 
 
 def _per_row(a: FloatArray, name: str, n: int) -> FloatArray:
@@ -347,6 +342,7 @@ class GazeField:
         socialcam.DegenerateError
             a window in which no two rays meet in front of the eyes (nothing to start from)
         """
+        strict = check_bool(strict, "strict")
         opts = apply_overrides(options, GazeFieldOptions, overrides)
         flat = _flatten(frames)
         n_frames = flat.n_frames
@@ -803,6 +799,11 @@ def cross_validate_gaze(
     check_choice(method, "method", ("field", "rbf"))
     flat = _flatten(frames)
     people = np.unique(flat.ids)
+    if len(people) < 3:
+        raise ValueError(
+            f"frames: cross-validation needs rays of at least 3 members (one left out, two "
+            f"stay), got {len(people)}"
+        )
     if eligible is None:
         pool = people
     else:

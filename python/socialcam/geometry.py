@@ -12,6 +12,7 @@ from socialcam import _core
 from socialcam._validate import (
     FloatArray,
     as_float_array,
+    check_bool,
     check_float,
     check_int,
     check_rounding,
@@ -122,8 +123,9 @@ def triangulate(
     """
     if not isinstance(cameras, Cameras):
         raise ValueError(f"cameras: expected socialcam.Cameras, got {type(cameras).__name__}")
-    if not isinstance(refine, (bool, np.bool_)):
-        raise ValueError(f"refine: expected a bool, got {refine!r}")
+    refine = check_bool(refine, "refine")
+    strict = check_bool(strict, "strict")
+    return_info = check_bool(return_info, "return_info")
     n_iter = check_int(max_iter, "max_iter", min=1)
     x_ = as_float_array(x, "x", allow_nan=True)
     single = x_.ndim == 2
@@ -183,6 +185,12 @@ def dct_basis(
     b = None if t1 is None else check_float(t1, "t1")
     if a is not None and b is not None and not a < b:
         raise ValueError(f"t0, t1: need t0 < t1, got {a} and {b}")
+    ends = np.concatenate([t, [x for x in (a, b) if x is not None]])
+    with np.errstate(over="ignore"):  # the default span adds half a spacing on each side
+        span = 2.0 * (ends.max() - ends.min()) if len(ends) else 0.0
+    if not np.isfinite(span):
+        name = "times" if a is None and b is None else "times, t0, t1"
+        raise ValueError(f"{name}: the span {ends.min():g} .. {ends.max():g} s overflows float64")
     return _core.dct_basis(t, kk, a, b)
 
 

@@ -99,6 +99,7 @@ def reconstruct_static(
         raise ValueError(f"image_dir: no images in {images}")
     if max_image_size < 64:
         raise ValueError(f"max_image_size: must be at least 64, got {max_image_size}")
+    overwrite = check_bool(overwrite, "overwrite")  # a truthy "no" must not delete out_dir
     out = Path(out_dir)
     if out.exists():
         if not overwrite:

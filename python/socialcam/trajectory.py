@@ -21,6 +21,7 @@ from socialcam._validate import (
     FloatArray,
     apply_overrides,
     as_float_array,
+    check_bool,
     check_choice,
     check_int,
     check_rounding,
@@ -245,6 +246,7 @@ class TrajectoryBatch:
 
 
 def _check_in_span(t: FloatArray, span: tuple[float, float, float], extrapolate: bool) -> None:
+    extrapolate = check_bool(extrapolate, "extrapolate")
     t0, t1, _ = span
     slack = 1e-9 * (t1 - t0)
     if not extrapolate and len(t) and (t.min() < t0 - slack or t.max() > t1 + slack):
@@ -402,6 +404,7 @@ def reconstruct_trajectory(
     ConvergenceError
         ``strict=True`` and the refinement did not converge.
     """
+    strict = check_bool(strict, "strict")
     opts = apply_overrides(options, TrajectoryOptions, overrides)
     cams, times = _cameras_arg(cameras)
     x_ = as_float_array(x, "x", (len(cams), 2), allow_nan=True)
@@ -449,6 +452,7 @@ def reconstruct_trajectories(
     -------
     TrajectoryBatch
     """
+    strict = check_bool(strict, "strict")
     opts = apply_overrides(options, TrajectoryOptions, overrides)
     cams, times = _cameras_arg(cameras)
     x_ = as_float_array(x, "x", (None, len(cams), 2), allow_nan=True)

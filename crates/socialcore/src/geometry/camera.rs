@@ -108,7 +108,14 @@ impl Camera {
     /// (thesis Sec 4.2.2).
     #[inline]
     pub fn ray_direction(&self, u: &Vector2<f64>) -> Vector3<f64> {
-        (self.r.transpose() * (self.k_inv * Vector3::new(u.x, u.y, 1.0))).normalize()
+        let d = self.r.transpose() * (self.k_inv * Vector3::new(u.x, u.y, 1.0));
+        // Scaled first: the squares of a pixel beyond ~1e154 overflow the plain norm.
+        let m = d.amax();
+        if m > 0.0 && m.is_finite() {
+            (d / m).normalize()
+        } else {
+            d.normalize()
+        }
     }
 }
 
@@ -131,6 +138,17 @@ mod tests {
         let p = c.projection_matrix() * x.push(1.0);
         let (u, _) = c.project(&x);
         assert_relative_eq!(u, Vector2::new(p.x / p.z, p.y / p.z), epsilon = 1e-9);
+    }
+
+    #[test]
+    fn ray_direction_of_huge_pixels_is_unit() {
+        // The squares of 1e200 px overflow a plain norm: NaN or a zero ray before.
+        let c = cam();
+        for u in [Vector2::new(3e200, -1e200), Vector2::new(1e300, 1e300)] {
+            let d = c.ray_direction(&u);
+            assert_relative_eq!(d.norm(), 1.0, epsilon = 1e-12);
+            assert_relative_eq!(d, c.ray_direction(&(u / 1e180)), epsilon = 1e-12);
+        }
     }
 
     #[test]
