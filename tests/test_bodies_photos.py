@@ -282,6 +282,8 @@ def test_known_length_gives_metres(tmp_path, clips):
         (Path(write_body(res, tmp_path / "o", plots=False)) / "report.json").read_text()
     )
     assert report["units"] == "metres" and abs(report["metres_per_model_unit"] - res.scale) < 1e-9
+    with pytest.raises(ValueError, match=r"^plots: expected a bool"):  # "no" drew them
+        write_body(res, tmp_path / "p", plots="no")  # type: ignore[arg-type]
     for bad, msg in ((("Nose", "RightShoulder", 0.3), "'Nose' is not one of"),
                      (("Head", "Head", 0.3), "two different joints"),
                      (("Head", "LeftHip", -1.0), "known_length"),

@@ -282,3 +282,5 @@ def test_view_writes_a_rerun_recording(first, scene, tmp_path):
     assert len(tracks) == len(res.tracks) > 0, rows
     with pytest.raises(ValueError, match="no finished socialcam run"):
         write_rrd(tmp_path, tmp_path / "x.rrd")
+    with pytest.raises(ValueError, match=r"^frames: expected a bool"):  # "no" wrote them
+        write_rrd(out, tmp_path / "y.rrd", frames="no")  # type: ignore[arg-type]

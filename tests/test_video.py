@@ -87,6 +87,10 @@ def test_constant_rate_round_trip(cfr):
         assert frames[0].image.shape == (H, W, 3) and frames[0].image.dtype == np.uint8
         gray = next(v.frames(gray=True)).image
         assert gray.shape == (H, W)
+        with pytest.raises(ValueError, match=r"^gray: expected a bool"):  # "no" gave gray
+            next(v.frames(gray="no"))  # type: ignore[arg-type]
+        with pytest.raises(ValueError, match=r"^gray: expected a bool"):
+            v.frame_at(0.0, gray=1)  # type: ignore[arg-type]
 
 
 def test_streaming_at_10_fps_gives_the_nearest_frames(cfr):

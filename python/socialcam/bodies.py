@@ -905,6 +905,7 @@ def write_body(result: PhotoBody, out_dir: str | os.PathLike[str], *, plots: boo
 
     if not isinstance(result, PhotoBody):
         raise ValueError("result: expected a PhotoBody from reconstruct_body_from_photos")
+    plots = check_bool(plots, "plots")
     out = os.fspath(out_dir)
     os.makedirs(out, exist_ok=True)
     b, t = result.body, np.asarray(result.cameras.times)

@@ -30,7 +30,7 @@ import cv2
 import numpy as np
 import numpy.typing as npt
 
-from socialcam._validate import FloatArray, check_float
+from socialcam._validate import FloatArray, check_bool, check_float
 
 IMAGE_EXTENSIONS = (".png", ".jpg", ".jpeg", ".bmp", ".tif", ".tiff", ".webp")
 
@@ -288,6 +288,7 @@ class Video:
         ≤ time < end``. Only the frames yielded are converted to arrays. ``Frame.time`` is
         the frame's own timestamp. Undecodable frames are skipped (nothing is yielded for
         them), counted in :attr:`n_corrupt` and reported by a :class:`CorruptFrameWarning`."""
+        gray = check_bool(gray, "gray")  # a truthy "no" gave gray frames
         times = self.timestamps()
         t0 = check_float(start, "start")
         t1 = float(times[-1]) + 1e-9 if end is None else check_float(end, "end")

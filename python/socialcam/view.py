@@ -43,7 +43,10 @@ def write_rrd(
 
     Raises ``ValueError`` when rerun-sdk is missing or ``run_dir`` holds no finished run.
     """
+    from socialcam._validate import check_bool
     from socialcam.pipeline import _charge_from_dict, _track_from_dict, load_poses
+
+    frames = check_bool(frames, "frames")
 
     rr = _import_rerun()
     out = Path(run_dir)
