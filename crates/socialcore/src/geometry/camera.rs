@@ -109,9 +109,10 @@ impl Camera {
     #[inline]
     pub fn ray_direction(&self, u: &Vector2<f64>) -> Vector3<f64> {
         let d = self.r.transpose() * (self.k_inv * Vector3::new(u.x, u.y, 1.0));
-        // Scaled first: the squares of a pixel beyond ~1e154 overflow the plain norm.
+        // The squares of a pixel beyond ~1e154 overflow the plain norm: such a direction is
+        // scaled first. Ordinary pixels take the plain path, bit for bit as before.
         let m = d.amax();
-        if m > 0.0 && m.is_finite() {
+        if m > 1e150 && m.is_finite() {
             (d / m).normalize()
         } else {
             d.normalize()
