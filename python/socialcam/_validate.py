@@ -47,7 +47,7 @@ def as_float_array(
     NaN only when ``allow_nan`` is false.
     """
     try:
-        raw = value if isinstance(value, np.ndarray) else np.asarray(value)
+        raw = np.asarray(value)
         # bool, complex and text would convert (True → 1, the imaginary part dropped,
         # "1.5" → 1.5), each almost surely a caller's mistake
         if raw.dtype.kind not in _NUMERIC_KINDS and raw.size:

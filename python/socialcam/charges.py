@@ -109,11 +109,9 @@ class GazeRays:
             ids = np.arange(n, dtype=np.int64)
         else:
             ids_in = np.asarray(self.ids)
-            if ids_in.shape != (n,) or not np.issubdtype(ids_in.dtype, np.integer):
-                raise ValueError(
-                    f"ids: expected {n} integer ids, got {ids_in.shape} {ids_in.dtype}"
-                )
-            ids = as_int_array(ids_in, "ids")  # uint64 beyond int64 refused, not wrapped
+            if ids_in.shape != (n,):
+                raise ValueError(f"ids: expected {n} integer ids, got shape {ids_in.shape}")
+            ids = as_int_array(ids_in, "ids")  # floats, bools and uint64 ≥ 2⁶³ refused
             if len(np.unique(ids)) != n:
                 raise ValueError("ids: person ids must be distinct within a frame")
         for name, arr in (("p", p), ("v", v), ("h", h), ("ids", ids)):

@@ -177,8 +177,8 @@ def calibrate_gaze(
     tol = check_float(tol, "tol", min=0.0)
     # solved about the centres' mean (the fixation point y moves back): far from the
     # origin (1e6 m) the head's centimetres of motion were lost and the start returned
-    check_rounding(cameras.C, "cameras.C", "the head's motion")
     moved = float(np.ptp(cameras.C, axis=0).max()) if len(cameras) else 0.0
+    check_rounding(cameras.C, "cameras.C", "the head's motion", moved)
     if len(cameras) >= 5 and moved < MIN_HEAD_MOTION:
         raise DegenerateError(
             f"cameras.C: the head moved {moved:.3g} m; calibration needs it to move side to "

@@ -240,11 +240,6 @@ def _flatten(frames: Sequence[object], default_h: float = 0.1) -> _Flat:
     )
 
 
-def _int_array(value: object, name: str) -> IntArray:
-    """An integer array: integer dtypes only (``[1, 0.5]`` is refused, not truncated)."""
-    return as_int_array(value, name)
-
-
 def _per_row(a: FloatArray, name: str, n: int) -> FloatArray:
     """A number or an ``(n,)`` array, as ``(n,)``."""
     if a.ndim > 1 or (a.ndim == 1 and a.shape[0] not in (1, n)):
@@ -716,7 +711,7 @@ def rbf_predict(
 
     flat = _flatten(frames)
     pts = as_float_array(points, "points", (None, 3))
-    fr = _int_array(frame, "frame")
+    fr = as_int_array(frame, "frame")
     if fr.shape != (len(pts),) or (fr < 0).any() or (fr >= flat.n_frames).any():
         raise ValueError("frame: expected one valid frame index per point")
     kernel = check_choice(
@@ -807,7 +802,7 @@ def cross_validate_gaze(
     if eligible is None:
         pool = people
     else:
-        el = _int_array(eligible, "eligible")
+        el = as_int_array(eligible, "eligible")
         if el.ndim != 1 or len(el) == 0:
             raise ValueError("eligible: expected a non-empty list of person ids")
         pool = np.intersect1d(people, el)
