@@ -118,6 +118,9 @@ The distance test alone admits points far from a short bone (a knee's distances 
 or the shoulders vary by a few per cent while the angle at the hip swings by 30-75 deg):
 ranges of the other trial's walking postures, which a window of another activity misses.
 85_02's marker ranges come from the same capture and stay as robust-kgate's.
+"robust-grow" (session 44) is robust-steady with k_growth = 1.5: where the result of the sizes
+the duration allows grew its basis (refine_k_max) to 12 or more vectors, the motion outran k = 8
+however short the window, and k = 12 and 16 are tried too (every method before it: k_growth None).
 Run: python benches/articulated_accuracy.py [--quick | --full] [--parts dev,fresh,...]
 [--methods robust,thesis] [--skeleton] [--static-camera]
 """
@@ -456,6 +459,7 @@ METHOD_OPTIONS: dict[str, dict] = {
     "robust-kgate": {"method": "robust", "k_alternatives": (12, 16), "k_per_second": 8.0},
 }
 METHOD_OPTIONS["robust-steady"] = dict(METHOD_OPTIONS["robust-kgate"])
+METHOD_OPTIONS["robust-grow"] = {**METHOD_OPTIONS["robust-steady"], "k_growth": 1.5}
 METHOD_OPTIONS.update(
     {f"robust-cap{c:g}": {**METHOD_OPTIONS["robust-kgate"], "angle_cap": float(c)} for c in CAPS}
 )
@@ -464,6 +468,7 @@ METHOD_OPTIONS.update(
 for _opts in METHOD_OPTIONS.values():
     _opts.setdefault("k_alternatives", ())
     _opts.setdefault("angle_cap", None)
+    _opts.setdefault("k_growth", None)
 # Methods given angle priors (BVH clips): the ranges learned with learn_angle_ranges over
 # every frame of the OTHER trial's clips (131_01* judged by 131_02* and the reverse; same
 # subject, so optimistic for other people): "bend" the angle to the parent's bone (joints
@@ -478,6 +483,7 @@ PRIOR_METHODS: dict[str, tuple[str, ...]] = {
     "robust-kgate": ("bend", "siblings", "rigid"),
     **{f"robust-cap{c:g}": ("bend", "siblings", "rigid") for c in CAPS},
     "robust-steady": ("bend", "siblings", "rigid", "steady"),
+    "robust-grow": ("bend", "siblings", "rigid", "steady"),
 }
 # learn_angle_ranges(rigid=RIGID): points whose distances to the joint and its parent vary by
 # less than 8 % (std / mean) count as rigid with them.
@@ -588,6 +594,7 @@ PARTS = (
     "fair",
     "final29",
     "rokoko",
+    "final30",
 )
 # Session 8's never-seen cuts: every clip sampled at 40 Hz (every third frame) from
 # frames 10 and 100, 60 frames each (the other parts sample every second frame).
@@ -709,6 +716,18 @@ ROKOKO_FILE = "rokoko_jesse_dance400.bvh"
 ROKOKO_RANGE_FRAMES = 150
 ROKOKO_CUTS = ((2, 150), (2, 210), (2, 270), (3, 155), (3, 215), (4, 150))
 OTHER_SUBJECT = ("jacks", *FAIR_CLIPS, "rokoko")
+# Session 44's never-seen cuts (defined and committed before they were run, to judge k_growth,
+# "robust-grow"): the walking trials' clips at 60 Hz from 149 and 177 and at 40 Hz from 83;
+# 85_02 at 60 Hz from 533 and at 40 Hz from 333; both hop cuts at 60 Hz from 105 and at 40 Hz
+# from 31; both FAIR clips at 60 Hz from 45 and 105 and at 40 Hz from 55; the Rokoko dance at
+# 50 Hz from 180 and 240; the jumping jacks at 30 Hz from 15 and 45 (start frames no other part
+# uses at these rates; windows that do not fit a clip are skipped).
+FINAL30_CUTS = ((2, 149), (2, 177), (3, 83))
+FINAL30_C3D_CUTS = ((2, 533), (3, 333))
+FINAL30_HOP_CUTS = ((2, 105), (3, 31))
+FINAL30_FAIR_CUTS = ((2, 45), (2, 105), (3, 55))
+FINAL30_ROKOKO_CUTS = ((2, 180), (2, 240))
+FINAL30_JACKS_CUTS = ((1, 15), (1, 45))
 
 
 def load_clips() -> dict[str, tuple[np.ndarray, list[tuple[int, int]]]]:
@@ -815,6 +834,12 @@ def all_windows(
     wins += cut("final29", FINAL29_C3D_CUTS, c3d)
     wins += cut("final29", FINAL29_HOP_CUTS, hop)
     wins += cut("rokoko", ROKOKO_CUTS, tuple(n for n in clips if n == "rokoko"))
+    wins += cut("final30", FINAL30_CUTS)
+    wins += cut("final30", FINAL30_C3D_CUTS, c3d)
+    wins += cut("final30", FINAL30_HOP_CUTS, hop)
+    wins += cut("final30", FINAL30_FAIR_CUTS, tuple(n for n in clips if n in FAIR_CLIPS))
+    wins += cut("final30", FINAL30_ROKOKO_CUTS, tuple(n for n in clips if n == "rokoko"))
+    wins += cut("final30", FINAL30_JACKS_CUTS, tuple(n for n in clips if n == "jacks"))
     return wins
 
 

@@ -443,6 +443,14 @@ class ArticulatedOptions:
         three seconds tries 12 and 16. Without ``cameras.times`` (frame indices, the
         duration unknown) every alternative is skipped. ``None`` tries every alternative
         whatever the duration.
+    k_growth : robust method, with ``k_alternatives``: where the result of the sizes tried
+        for the window's duration grew its basis in the final refinement
+        (``refine_k_max``) to at least ``k_growth × k`` vectors, the motion outruns ``k``
+        however short the window: the ``k_alternatives`` that ``k_per_second`` skipped are
+        then tried too (each up to the number of frames) and the choice is made among all
+        of them as above. A dancer's thigh or a hopping subject's foot leaves ``k = 8``
+        behind within one second; the start chosen at ``k`` then misses the motion and the
+        grown basis cannot undo it. ``None``: the duration alone decides (``k_per_second``).
     max_iter : Levenberg–Marquardt iterations of the refinement (≥ 1).
     time_limit : seconds per binary program (the best incumbent is used after it), or
         ``None``.
@@ -471,6 +479,7 @@ class ArticulatedOptions:
     angle_cap: float | None = None
     k_alternatives: tuple[int, ...] = (12, 16)
     k_per_second: float | None = 8.0
+    k_growth: float | None = None
     max_iter: int = 100
     time_limit: float | None = None
     node_limit: int | None = DEFAULT_NODE_LIMIT
@@ -507,6 +516,8 @@ class ArticulatedOptions:
             check_int(kk, f"k_alternatives[{i}]", min=1)
         if self.k_per_second is not None:
             check_float(self.k_per_second, "k_per_second", min=0.0, max=1e6, min_exclusive=True)
+        if self.k_growth is not None:
+            check_float(self.k_growth, "k_growth", min=1.0, max=1e6)
         check_int(self.max_iter, "max_iter", min=1, max=100_000)
         if self.time_limit is not None:
             check_float(self.time_limit, "time_limit", min=0.0, max=1e9)
@@ -642,23 +653,34 @@ def reconstruct_articulated(
         priors.append((ref, lo, hi))
     t = _times(cameras)
     sizes = [opts.k]
+    skipped: list[int] = []  # sizes k_per_second skipped, tried where the basis grew
     if opts.method == "robust":
         cap = _largest_size(cameras, opts.k_per_second)
         for i, kk in enumerate(opts.k_alternatives):
             kk = check_int(kk, f"k_alternatives[{i}]", min=1)
             if kk <= min(cap, f):
                 sizes.append(kk)
+            elif kk <= f and opts.k_growth is not None:
+                skipped.append(kk)
     best: tuple[float, dict[str, Any]] | None = None
-    for kk in dict.fromkeys(sizes):
+
+    def run(kk: int) -> None:
+        nonlocal best
         d = _core.reconstruct_articulated(
             cameras.K, cameras.R, cameras.C, x_, p_, t, length_, replace(opts, k=kk), kids, priors
         )
-        if len(sizes) == 1:
-            return _traj(d, t)
         score = _choice_score(d, p_, priors, opts.angle_tolerance, opts.angle_cap)
         if best is None or score < best[0]:
             best = (score, d)
+
+    for kk in dict.fromkeys(sizes):
+        run(kk)
     assert best is not None
+    grown = len(best[1]["coeffs_theta"])
+    if opts.k_growth is not None and grown >= opts.k_growth * opts.k:
+        for kk in dict.fromkeys(skipped):
+            if kk not in sizes:
+                run(kk)
     return _traj(best[1], t)
 
 
