@@ -456,7 +456,7 @@ class ArticulatedOptions:
         falls below 2 (2.26 → 1.73, 2.18 → 1.99), but on a standing clip a wrist the pixels
         cannot place takes the other side (0.01 → 0.5), and each size tried costs one more
         reconstruction where the basis grew (most windows of fast motion); see the bench's
-        record. Without ``cameras.times`` the gate still applies.
+        record.
     max_iter : Levenberg–Marquardt iterations of the refinement (≥ 1).
     time_limit : seconds per binary program (the best incumbent is used after it), or
         ``None``.
@@ -668,25 +668,19 @@ def reconstruct_articulated(
                 sizes.append(kk)
             elif kk <= f and opts.k_growth is not None:
                 skipped.append(kk)
-    best: tuple[float, dict[str, Any]] | None = None
 
-    def run(kk: int) -> None:
-        nonlocal best
+    def run(kk: int) -> tuple[float, dict[str, Any]]:
         d = _core.reconstruct_articulated(
             cameras.K, cameras.R, cameras.C, x_, p_, t, length_, replace(opts, k=kk), kids, priors
         )
-        score = _choice_score(d, p_, priors, opts.angle_tolerance, opts.angle_cap)
-        if best is None or score < best[0]:
-            best = (score, d)
+        return _choice_score(d, p_, priors, opts.angle_tolerance, opts.angle_cap), d
 
-    for kk in dict.fromkeys(sizes):
-        run(kk)
-    assert best is not None
+    # the lowest score wins; min keeps the first of equals (the size tried first)
+    best = min((run(kk) for kk in dict.fromkeys(sizes)), key=lambda r: r[0])
     grown = len(best[1]["coeffs_theta"])
     if opts.k_growth is not None and grown >= opts.k_growth * opts.k:
-        for kk in dict.fromkeys(skipped):
-            if kk not in sizes:
-                run(kk)
+        more = [run(kk) for kk in dict.fromkeys(skipped) if kk not in sizes]
+        best = min([best, *more], key=lambda r: r[0])
     return _traj(best[1], t)
 
 
